@@ -1,0 +1,102 @@
+"""Images and masks on disk: 8- or 16-bit PNG/JPEG/TIFF/BMP, grayscale or RGB.
+
+Images are read as float32 in [0, 1]; grayscale stays ``H x W``, colour becomes ``H x W x 3``
+in RGB order. Masks are ``H x W`` bool (any non-zero pixel is inside).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import input_error
+from .atomic import atomic_path
+
+__all__ = ["IMAGE_SUFFIXES", "read_image", "write_image", "read_mask", "write_mask", "image_bit_depth"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+def _read_raw(path: Path) -> np.ndarray:
+    if not path.is_file():
+        raise input_error(path, "file not found")
+    if path.stat().st_size == 0:
+        raise input_error(path, "file is empty")
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.size == 0:
+        raise input_error(path, "not a readable image (corrupt or unsupported format)")
+    return raw
+
+
+def image_bit_depth(path: str | Path) -> int:
+    """8 or 16: the bit depth stored in an image file."""
+    return 16 if _read_raw(Path(path)).dtype == np.uint16 else 8
+
+
+def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
+    """Read an image as float32 in [0, 1].
+
+    ``gray=None`` keeps what the file holds (colour images whose three channels are equal come
+    back grayscale); ``True`` converts to one channel; ``False`` always returns RGB.
+    """
+    path = Path(path)
+    raw = _read_raw(path)
+    if raw.dtype == np.uint8:
+        image = raw.astype(np.float32) / 255.0
+    elif raw.dtype == np.uint16:
+        image = raw.astype(np.float32) / 65535.0
+    elif raw.dtype in (np.float32, np.float64):
+        image = raw.astype(np.float32)
+        if not np.all(np.isfinite(image)):
+            raise input_error(path, "image contains NaN or Inf")
+        image = np.clip(image, 0.0, 1.0)
+    else:
+        raise input_error(path, f"unsupported pixel type {raw.dtype}")
+    if image.ndim == 3:
+        if image.shape[2] == 4:
+            image = image[..., :3]
+        image = image[..., ::-1] if image.shape[2] == 3 else image[..., 0]
+    if image.ndim == 3 and gray is None:
+        if np.array_equal(image[..., 0], image[..., 1]) and np.array_equal(image[..., 1], image[..., 2]):
+            image = image[..., 0]
+    if gray is True and image.ndim == 3:
+        image = image @ np.array([0.299, 0.587, 0.114], np.float32)
+    if gray is False and image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def write_image(path: str | Path, image: np.ndarray, bits: int = 8) -> Path:
+    """Write a float image in [0, 1] (``H x W`` or ``H x W x 3`` RGB) as 8- or 16-bit, atomically."""
+    path = Path(path)
+    image = np.asarray(image, np.float32)
+    if bits not in (8, 16):
+        raise ValueError(f"bits must be 8 or 16, got {bits}")
+    if not np.all(np.isfinite(image)):
+        raise ValueError(f"{path}: refusing to write an image with NaN or Inf")
+    scale = 255.0 if bits == 8 else 65535.0
+    data = np.round(np.clip(image, 0.0, 1.0) * scale).astype(np.uint8 if bits == 8 else np.uint16)
+    if data.ndim == 3:
+        data = np.ascontiguousarray(data[..., ::-1])
+    with atomic_path(path) as temporary:
+        if not cv2.imwrite(str(temporary), data):
+            raise OSError(f"{path}: could not write image")
+    return path
+
+
+def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a mask as ``H x W`` bool; ``shape`` (H, W) is checked when given."""
+    path = Path(path)
+    raw = _read_raw(path)
+    if raw.ndim == 3:
+        raw = raw.max(axis=2)
+    mask = raw > 0
+    if shape is not None and mask.shape != tuple(shape):
+        raise input_error(path, f"mask is {mask.shape[1]}x{mask.shape[0]} but its image is {shape[1]}x{shape[0]}")
+    return mask
+
+
+def write_mask(path: str | Path, mask: np.ndarray) -> Path:
+    """Write a bool mask as an 8-bit PNG (0 / 255), atomically."""
+    return write_image(path, np.asarray(mask, bool).astype(np.float32), bits=8)

@@ -1,0 +1,322 @@
+"""Bad input fails with one InputError naming the file; failed writes leave nothing behind."""
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+import fingersplat3d.io.capture as capture_module
+from fingersplat3d.errors import InputError
+from fingersplat3d.io import (load_image_folder, load_uwa, read_cameras, read_capture, read_depth, read_minutiae,
+                              write_capture, write_depth)
+from fingersplat3d.scene import Camera, Capture, View
+
+H, W = 24, 32
+
+
+def good_capture(with_depth=True) -> Capture:
+    rng = np.random.default_rng(0)
+    mask = np.zeros((H, W), bool)
+    mask[2:5, 3:9] = True
+    views = tuple(View(f"v{i}", rng.integers(0, 256, (H, W)) / 255.0, mask=mask,
+                       depth=np.full((H, W), 10.0, np.float32) if with_depth else None,
+                       camera=Camera.from_focal(40.0, W, H)) for i in range(3))
+    return Capture(views, {"units": "mm"})
+
+
+@pytest.fixture
+def folder(tmp_path):
+    return write_capture(good_capture(), tmp_path / "cap")
+
+
+def raises_naming(name: str, function, *args, **kwargs) -> str:
+    """Call ``function``; it must raise an InputError whose single-line message names ``name``."""
+    with pytest.raises(InputError) as info:
+        function(*args, **kwargs)
+    message = str(info.value)
+    assert name in message, message
+    assert "\n" not in message
+    return message
+
+
+# ---------------------------------------------------------------------------------------- cameras.json
+
+def camera_entry(**changes):
+    entry = {"name": "v0", "image": "images/v0.png", "width": W, "height": H,
+             "K": [[40.0, 0, 15.5], [0, 40.0, 11.5], [0, 0, 1]], "world_to_cam": np.eye(4).tolist()}
+    entry.update(changes)
+    return entry
+
+
+@pytest.mark.parametrize("content, problem", [
+    ('{"units": "mm", "views": [', "not valid JSON"),
+    ('[]', "JSON object"),
+    (json.dumps({"views": [camera_entry()]}), "units"),
+    (json.dumps({"units": "mm"}), "views"),
+    (json.dumps({"units": "inch", "views": [camera_entry()]}), "units"),
+    (json.dumps({"units": "mm", "scale_mm_per_unit": 2.0, "views": [camera_entry()]}), "scale_mm_per_unit"),
+    (json.dumps({"units": "arbitrary", "scale_mm_per_unit": -1, "views": [camera_entry()]}), "scale_mm_per_unit"),
+    (json.dumps({"units": "mm", "views": []}), "non-empty"),
+    (json.dumps({"units": "mm", "views": [{k: v for k, v in camera_entry().items() if k != "K"}]}), "'K'"),
+    (json.dumps({"units": "mm", "views": [camera_entry(K=[[1, 0], [0, 1]])]}), "3x3"),
+    (json.dumps({"units": "mm", "views": [camera_entry(world_to_cam=np.eye(3).tolist())]}), "4x4"),
+    ('{"units": "mm", "views": [' + json.dumps(camera_entry()).replace("40.0", "NaN", 1) + "]}", "non-finite"),
+    (json.dumps({"units": "mm", "views": [camera_entry(world_to_cam=np.diag([2.0, 1, 1, 1]).tolist())]}), "rigid"),
+    (json.dumps({"units": "mm", "views": [camera_entry(world_to_cam=np.diag([1.0, 1, -1, 1]).tolist())]}), "rigid"),
+    (json.dumps({"units": "mm", "views": [camera_entry(K=[[-4.0, 0, 1], [0, 4, 1], [0, 0, 1]])]}), "positive focal"),
+    (json.dumps({"units": "mm", "views": [camera_entry(width=31.5)]}), "width"),
+    (json.dumps({"units": "mm", "views": [camera_entry(K=[[4.0, 0, 1], [0, True, 1], [0, 0, 1]])]}), "numbers"),
+    (json.dumps({"units": "mm", "views": [camera_entry(), camera_entry()]}), "twice"),
+])
+def test_bad_cameras_json(tmp_path, content, problem):
+    path = tmp_path / "cameras.json"
+    path.write_text(content)
+    message = raises_naming("cameras.json", read_cameras, path)
+    assert problem in message
+
+
+def test_bad_camera_names_the_view(tmp_path):
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps({"units": "mm", "views": [camera_entry(), camera_entry(name="right", width=-3)]}))
+    assert "'right'" in raises_naming("cameras.json", read_cameras, path)
+
+
+def test_missing_cameras_json(tmp_path):
+    raises_naming("cameras.json", read_cameras, tmp_path / "cameras.json")
+
+
+# ------------------------------------------------------------------------------------------ depth maps
+
+@pytest.mark.parametrize("array, problem", [
+    (np.array([[1.0, np.inf]], np.float32), "Inf"),
+    (np.array([[1.0, -2.0]], np.float32), "negative"),
+    (np.ones((2, 2, 2), np.float32), "2-D"),
+    (np.array([["a", "b"]]), "real numbers"),
+])
+def test_bad_depth(tmp_path, array, problem):
+    path = tmp_path / "bad_depth.npy"
+    np.save(path, array)
+    assert problem in raises_naming("bad_depth.npy", read_depth, path)
+
+
+def test_depth_wrong_shape_and_not_npy(tmp_path):
+    path = write_depth(tmp_path / "d.npy", np.ones((4, 5)))
+    assert "5x4" in raises_naming("d.npy", read_depth, path, shape=(4, 6))
+    (tmp_path / "junk.npy").write_bytes(b"not numpy at all")
+    raises_naming("junk.npy", read_depth, tmp_path / "junk.npy")
+    raises_naming("absent.npy", read_depth, tmp_path / "absent.npy")
+
+
+def test_write_depth_refuses_inf(tmp_path):
+    with pytest.raises(ValueError, match="Inf"):
+        write_depth(tmp_path / "d.npy", np.array([[np.inf]]))
+    assert not list(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------------------- minutiae
+
+@pytest.mark.parametrize("data, problem", [
+    ({"views": {}}, "minutiae_3d"),
+    ({"minutiae_3d": [{"id": 0, "kind": "loop", "xyz": [0, 0, 0], "direction": [1, 0, 0]}]}, "kind"),
+    ({"minutiae_3d": [{"id": 0, "kind": "ending", "xyz": [0, 0], "direction": [1, 0, 0]}]}, "xyz"),
+    ({"minutiae_3d": [{"id": 0, "kind": "ending", "xyz": [0, 0, 0], "direction": [0, 0, 0]}]}, "zero"),
+    ({"minutiae_3d": [{"id": 0, "kind": "ending", "xyz": [0, 0, 0]}]}, "direction"),
+    ({"minutiae_3d": [{"id": 0, "kind": "ending", "xyz": [0, 0, 0], "direction": [1, 0, 0]}] * 2}, "repeats"),
+    ({"minutiae_3d": [], "views": {"v0": [{"id": 3, "uv": [1, 2], "angle_deg": 0, "visible": True}]}}, "id 3"),
+    ({"minutiae_3d": [{"id": 0, "kind": "ending", "xyz": [0, 0, 0], "direction": [1, 0, 0]}],
+      "views": {"v0": [{"id": 0, "uv": [1, 2], "angle_deg": 0, "visible": "yes"}]}}, "visible"),
+])
+def test_bad_minutiae(tmp_path, data, problem):
+    path = tmp_path / "minutiae.json"
+    path.write_text(json.dumps(data))
+    assert problem in raises_naming("minutiae.json", read_minutiae, path)
+
+
+def test_minutiae_invalid_json(tmp_path):
+    (tmp_path / "minutiae.json").write_text("{oops")
+    raises_naming("minutiae.json", read_minutiae, tmp_path / "minutiae.json")
+
+
+# ------------------------------------------------------------------------------------- capture folders
+
+def test_capture_folder_missing(tmp_path):
+    raises_naming("nothing_here", read_capture, tmp_path / "nothing_here")
+
+
+def test_capture_without_images_folder(tmp_path):
+    (tmp_path / "empty").mkdir()
+    raises_naming("empty", read_capture, tmp_path / "empty")
+
+
+def test_capture_images_folder_without_images(tmp_path):
+    (tmp_path / "cap" / "images").mkdir(parents=True)
+    raises_naming("images", read_capture, tmp_path / "cap")
+
+
+def test_listed_image_missing(folder):
+    (folder / "images" / "v1.png").unlink()
+    assert "'v1'" in raises_naming("v1.png", read_capture, folder)
+
+
+def test_unreadable_image(folder):
+    (folder / "images" / "v2.png").write_bytes(b"\x89PNG garbage")
+    raises_naming("v2.png", read_capture, folder)
+
+
+def test_mask_size_mismatch(folder):
+    cv2.imwrite(str(folder / "masks" / "v0.png"), np.full((H, W + 1), 255, np.uint8))
+    raises_naming("v0.png", read_capture, folder)
+
+
+def test_empty_mask(folder):
+    cv2.imwrite(str(folder / "masks" / "v1.png"), np.zeros((H, W), np.uint8))
+    assert "empty" in raises_naming("v1.png", read_capture, folder)
+
+
+def test_depth_inf_is_an_error_nan_only_is_fine(folder):
+    np.save(folder / "depth" / "v0.npy", np.full((H, W), np.nan, np.float32))
+    assert np.isnan(read_capture(folder)["v0"].depth).all()
+    depth = np.full((H, W), 5.0, np.float32)
+    depth[1, 1] = np.inf
+    np.save(folder / "depth" / "v1.npy", depth)
+    assert "Inf" in raises_naming("v1.npy", read_capture, folder)
+
+
+def test_depth_wrong_shape_in_capture(folder):
+    np.save(folder / "depth" / "v2.npy", np.ones((H - 1, W), np.float32))
+    raises_naming("v2.npy", read_capture, folder)
+
+
+def edit_json(path, change):
+    data = json.loads(path.read_text())
+    change(data)
+    path.write_text(json.dumps(data))
+
+
+def test_cameras_name_a_view_without_image(folder):
+    edit_json(folder / "cameras.json", lambda data: data["views"].append({**data["views"][0], "name": "ghost"}))
+    assert "'ghost'" in raises_naming("cameras.json", read_capture, folder)
+
+
+def test_cameras_miss_a_view(folder):
+    edit_json(folder / "cameras.json", lambda data: data["views"].pop())
+    assert "'v2'" in raises_naming("cameras.json", read_capture, folder)
+
+
+def test_cameras_size_differs_from_image(folder):
+    edit_json(folder / "cameras.json", lambda data: data["views"][1].update(width=64))
+    assert "64x24" in raises_naming("cameras.json", read_capture, folder)
+
+
+@pytest.mark.parametrize("change, problem", [
+    (lambda data: data.update(format="something-else"), "format"),
+    (lambda data: data.update(version=99), "newer"),
+    (lambda data: data.update(version="1"), "version"),
+    (lambda data: data.update(views="v0"), "views"),
+    (lambda data: data.update(views=["v0", "v0"]), "twice"),
+    (lambda data: data.update(files=[]), "files"),
+    (lambda data: data.update(metadata=3), "metadata"),
+    (lambda data: data["files"]["images"].update(v0="../../etc/passwd"), "outside"),
+    (lambda data: data["files"]["images"].update(v9="images/v9.png"), "'v9'"),
+])
+def test_malformed_manifest(folder, change, problem):
+    edit_json(folder / "manifest.json", change)
+    assert problem in raises_naming("manifest.json", read_capture, folder)
+
+
+def test_manifest_invalid_json(folder):
+    (folder / "manifest.json").write_text('{"format": ')
+    raises_naming("manifest.json", read_capture, folder)
+
+
+def test_manifest_lists_a_missing_view(folder):
+    edit_json(folder / "manifest.json", lambda data: data["views"].append("v7"))
+    assert "'v7'" in raises_naming("v7.png", read_capture, folder)
+
+
+# ------------------------------------------------------------------------------------------- datasets
+
+def test_uwa_incomplete_group_names_group_and_file(tmp_path):
+    for frame in (0, 2):
+        cv2.imwrite(str(tmp_path / f"3_1_2_{frame}.jpg"), np.zeros((H, W), np.uint8))
+    message = raises_naming("3_1_2_1.jpg", load_uwa, tmp_path)
+    assert "subject 3, finger 1, capture 2" in message and "frame 1" in message
+
+
+def test_uwa_nothing_matches(tmp_path):
+    cv2.imwrite(str(tmp_path / "photo.jpg"), np.zeros((H, W), np.uint8))
+    raises_naming(tmp_path.name, load_uwa, tmp_path)
+
+
+def test_uwa_frames_of_different_sizes(tmp_path):
+    for frame in range(3):
+        cv2.imwrite(str(tmp_path / f"1_1_1_{frame}.jpg"), np.zeros((H, W + (frame == 2)), np.uint8))
+    raises_naming("1_1_1_2.jpg", load_uwa, tmp_path)
+
+
+def test_image_folder_odd_size_and_too_few(tmp_path):
+    for name, width in (("a", W), ("b", W), ("c", W + 2)):
+        cv2.imwrite(str(tmp_path / f"{name}.png"), np.zeros((H, width), np.uint8))
+    assert "c.png" in raises_naming("c.png", load_image_folder, tmp_path)
+    (tmp_path / "c.png").unlink()
+    raises_naming(tmp_path.name, load_image_folder, tmp_path, min_views=3)
+    raises_naming("missing.png", load_image_folder, [tmp_path / "a.png", tmp_path / "missing.png"])
+    (tmp_path / "notes.txt").write_text("hi")
+    raises_naming("notes.txt", load_image_folder, [tmp_path / "a.png", tmp_path / "notes.txt"])
+
+
+def test_image_folder_empty_mask(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((H, W), np.uint8))
+    cv2.imwrite(str(tmp_path / "a_mask.png"), np.zeros((H, W), np.uint8))
+    raises_naming("a_mask.png", load_image_folder, tmp_path)
+
+
+# ------------------------------------------------------------------------------ nothing half-written
+
+def leftovers(parent):
+    return sorted(path.name for path in parent.iterdir())
+
+
+@pytest.mark.parametrize("writer", ["write_mask", "write_depth", "write_cameras", "write_image"])
+def test_failed_write_leaves_nothing(tmp_path, monkeypatch, writer):
+    original = getattr(capture_module, writer)
+    calls = []
+
+    def fail_after_first(*args, **kwargs):
+        calls.append(args[0])
+        if len(calls) > 1 or writer in ("write_cameras",):
+            raise OSError("disk full (simulated)")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(capture_module, writer, fail_after_first)
+    with pytest.raises(OSError, match="simulated"):
+        write_capture(good_capture(), tmp_path / "out")
+    assert calls  # the writer was reached, so something had been written before the failure
+    assert leftovers(tmp_path) == []
+
+
+def test_failed_overwrite_keeps_the_old_folder(tmp_path, monkeypatch):
+    folder = write_capture(good_capture(), tmp_path / "out")
+    before = read_capture(folder)
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full (simulated)")
+
+    monkeypatch.setattr(capture_module, "write_depth", broken)
+    with pytest.raises(OSError):
+        write_capture(good_capture(with_depth=True), folder, overwrite=True)
+    assert leftovers(tmp_path) == ["out"]
+    after = read_capture(folder)
+    for x, y in zip(before.views, after.views):
+        np.testing.assert_array_equal(x.image, y.image)
+
+
+def test_unwritable_inputs_are_refused_before_writing(tmp_path):
+    capture = good_capture()
+    empty = Capture((capture.views[0], capture.views[1].with_(mask=np.zeros((H, W), bool))))
+    assert "empty mask" in raises_naming("out", write_capture, empty, tmp_path / "out")
+    bad_name = Capture((capture.views[0].with_(name="a/b"),))
+    raises_naming("out", write_capture, bad_name, tmp_path / "out")
+    inf_depth = Capture((capture.views[0].with_(depth=np.full((H, W), np.inf, np.float32)),))
+    raises_naming("out", write_capture, inf_depth, tmp_path / "out")
+    assert leftovers(tmp_path) == []

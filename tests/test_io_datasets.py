@@ -1,0 +1,147 @@
+"""Dataset loaders: UWA 3D/2D raw frames, CFPose, plain image folders, and the dispatcher."""
+import cv2
+import numpy as np
+import pytest
+
+from fingersplat3d.errors import InputError
+from fingersplat3d.io import (find_uwa_groups, load_any, load_cfpose, load_image_folder, load_uwa, write_capture)
+from fingersplat3d.io.datasets import natural_key
+from fingersplat3d.scene import Capture, View
+
+H, W = 24, 32
+
+
+def gray(seed: int, shape=(H, W)) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, shape, dtype=np.uint8)
+
+
+def make_uwa(folder, groups=(("1", "2", "1"), ("1", "2", "2"), ("10", "3", "1")), frames=range(6)):
+    folder.mkdir(parents=True, exist_ok=True)
+    for index, (subject, finger, capture) in enumerate(groups):
+        for frame in frames:
+            cv2.imwrite(str(folder / f"{subject}_{finger}_{capture}_{frame}.jpg"), gray(10 * index + frame))
+    return folder
+
+
+def make_cfpose(folder, fingers=("1", "A3"), poses=range(1, 11)):
+    folder.mkdir(parents=True, exist_ok=True)
+    suffixes = (".bmp", ".png")
+    for index, finger in enumerate(fingers):
+        for pose in poses:
+            cv2.imwrite(str(folder / f"{finger}_{pose}{suffixes[pose % 2]}"), gray(100 * index + pose))
+    return folder
+
+
+def test_natural_key():
+    assert sorted(["img10", "img2", "Img1", "img"], key=natural_key) == ["img", "Img1", "img2", "img10"]
+
+
+def test_uwa_groups_views_and_metadata(tmp_path):
+    folder = make_uwa(tmp_path / "uwa")
+    (folder / "readme.txt").write_text("not a frame")
+    cv2.imwrite(str(folder / "thumbnail.png"), gray(0))
+    captures = load_uwa(folder)
+    assert [(c.metadata["subject"], c.metadata["capture"]) for c in captures] == [("1", "1"), ("1", "2"), ("10", "1")]
+    first = captures[0]
+    assert first.names == ["f0", "f1", "f2"] and not first.has_cameras
+    assert first["f0"].image.shape == (H, W)  # 8-bit grayscale stays one channel
+    expected = cv2.imread(str(folder / "1_2_1_1.jpg"), cv2.IMREAD_UNCHANGED) / 255.0
+    np.testing.assert_array_equal(first["f1"].image, expected.astype(np.float32))
+    assert first.metadata["dataset"] == "uwa" and first.metadata["finger"] == "2"
+    assert first.metadata["sources"]["f2"].endswith("1_2_1_2.jpg")
+    assert set(first.metadata["lighting"].values()) == {"plain"}
+
+
+def test_uwa_filters_and_structured_light(tmp_path):
+    folder = make_uwa(tmp_path / "uwa")
+    only = load_uwa(folder, subject=10)
+    assert len(only) == 1 and only[0].metadata["subject"] == "10"
+    assert len(load_uwa(folder, subject="01", finger=2, capture=2)) == 1
+    lit = load_uwa(folder, subject=1, capture=1, structured_light=True)[0]
+    assert lit.names == ["f0", "f1", "f2", "f3", "f4", "f5"]
+    assert lit.metadata["lighting"]["f4"] == "structured"
+    with pytest.raises(InputError, match="subject=7"):
+        load_uwa(folder, subject=7)
+
+
+def test_uwa_only_plain_frames_needed_without_structured_light(tmp_path):
+    folder = make_uwa(tmp_path / "uwa", groups=(("5", "1", "1"),), frames=range(3))
+    assert len(load_uwa(folder)) == 1
+    with pytest.raises(InputError, match=r"5_1_1_3\.jpg"):
+        load_uwa(folder, structured_light=True)
+
+
+def test_uwa_list_of_files_and_subfolders(tmp_path):
+    folder = make_uwa(tmp_path / "uwa" / "subject1", groups=(("1", "2", "1"),))
+    make_uwa(tmp_path / "uwa" / "subject2", groups=(("2", "2", "1"),))
+    assert len(load_uwa(tmp_path / "uwa")) == 2  # dataset folders are searched recursively
+    files = [folder / f"1_2_1_{frame}.jpg" for frame in range(3)]
+    captures = load_uwa(files)
+    assert len(captures) == 1 and captures[0].names == ["f0", "f1", "f2"]
+    groups = find_uwa_groups(tmp_path / "uwa")
+    assert [group.subject for group in groups] == ["1", "2"] and sorted(groups[0].frames) == list(range(6))
+
+
+def test_cfpose_orders_views_by_pose(tmp_path):
+    folder = make_cfpose(tmp_path / "cfpose")
+    captures = load_cfpose(folder)
+    assert [c.metadata["finger"] for c in captures] == ["1", "A3"]
+    assert captures[0].names == [f"p{pose}" for pose in range(1, 11)]
+    assert captures[1].metadata["poses"] == list(range(1, 11))
+    expected = cv2.imread(str(folder / "A3_10.bmp"), cv2.IMREAD_UNCHANGED) / 255.0
+    np.testing.assert_array_equal(captures[1]["p10"].image, expected.astype(np.float32))
+    only = load_cfpose(folder, finger="A3")
+    assert len(only) == 1 and only[0].metadata["dataset"] == "cfpose"
+    with pytest.raises(InputError, match="finger 9"):
+        load_cfpose(folder, finger=9)
+
+
+def test_image_folder_natural_order_and_masks(tmp_path):
+    folder = tmp_path / "photos"
+    (folder / "masks").mkdir(parents=True)
+    for index, name in enumerate(["img10", "img2", "img1"]):
+        cv2.imwrite(str(folder / f"{name}.png"), gray(index))
+    mask = np.zeros((H, W), np.uint8)
+    mask[4:10, 5:20] = 255
+    cv2.imwrite(str(folder / "masks" / "img2.png"), mask)
+    cv2.imwrite(str(folder / "img10_mask.png"), mask)
+    capture = load_image_folder(folder)
+    assert capture.names == ["img1", "img2", "img10"]
+    assert capture["img1"].mask is None
+    np.testing.assert_array_equal(capture["img2"].mask, mask > 0)
+    np.testing.assert_array_equal(capture["img10"].mask, mask > 0)
+    assert capture.metadata["dataset"] == "images"
+
+
+def test_image_folder_explicit_list_keeps_order_and_rgb(tmp_path):
+    paths = []
+    for index, name in enumerate(["b", "a"]):
+        rgb = np.random.default_rng(index).integers(0, 256, (H, W, 3), dtype=np.uint8)
+        cv2.imwrite(str(tmp_path / f"{name}.png"), rgb)
+        paths.append(tmp_path / f"{name}.png")
+    capture = load_image_folder(paths, min_views=2)
+    assert capture.names == ["b", "a"] and capture["a"].channels == 3
+    assert load_image_folder(paths, gray=True)["a"].channels == 1
+    with pytest.raises(InputError, match="at least 3"):
+        load_image_folder(paths, min_views=3)
+
+
+def test_load_any_dispatch(tmp_path):
+    uwa = make_uwa(tmp_path / "uwa", groups=(("1", "1", "1"),))
+    cfpose = make_cfpose(tmp_path / "cfpose", fingers=("7",), poses=range(1, 4))
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    for name in ("left", "right"):
+        cv2.imwrite(str(plain / f"{name}.jpg"), gray(3))
+    capture_folder = write_capture(Capture((View("v0", np.zeros((H, W))),), {"units": "mm"}), tmp_path / "cap")
+
+    assert [c.metadata["dataset"] for c in load_any(uwa)] == ["uwa"]
+    assert load_any(cfpose)[0].names == ["p1", "p2", "p3"]
+    assert load_any(plain)[0].names == ["left", "right"]
+    assert load_any(capture_folder)[0].names == ["v0"]
+    assert load_any([plain / "right.jpg", plain / "left.jpg"])[0].names == ["right", "left"]
+    assert len(load_any([uwa, cfpose, plain])) == 3
+    with pytest.raises(InputError):
+        load_any([plain, plain / "left.jpg"])
+    with pytest.raises(InputError, match="nowhere"):
+        load_any(tmp_path / "nowhere")
