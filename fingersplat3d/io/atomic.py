@@ -15,6 +15,12 @@ from typing import Iterator
 __all__ = ["atomic_path", "atomic_dir"]
 
 
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary file path next to ``path``; move it onto ``path`` on success."""
@@ -24,6 +30,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
                                          dir=path.parent)
     os.close(handle)
     temporary = Path(temporary)
+    os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes 0600; give the file ordinary permissions
     try:
         yield temporary
         os.replace(temporary, path)
@@ -43,6 +50,7 @@ def atomic_dir(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
         raise FileExistsError(f"{path}: already exists and is not empty (use --overwrite to replace it)")
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-", dir=path.parent))
+    os.chmod(temporary, 0o777 & ~_umask())  # mkdtemp makes 0700
     try:
         yield temporary
         if path.exists():

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..errors import InputError, input_error
 from ..scene import Capture, View
+from .ply import write_mesh_ply
 from .atomic import atomic_dir
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
@@ -137,8 +138,9 @@ def _write_mesh(path: Path, mesh: Any) -> None:
         raise TypeError(f"mesh must be an open3d.geometry.TriangleMesh or a PLY path, got {type(mesh).__name__}")
     if len(mesh.vertices) == 0:
         raise ValueError(f"{path}: refusing to write an empty mesh")
-    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
-        raise OSError(f"{path}: Open3D could not write the mesh")
+    normals = np.asarray(mesh.vertex_normals) if mesh.has_vertex_normals() else None
+    colors = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else None
+    write_mesh_ply(path, np.asarray(mesh.vertices), np.asarray(mesh.triangles), normals, colors)
 
 
 def write_capture(capture: Capture, folder: str | Path, *, minutiae: dict | None = None, mesh: Any = None,

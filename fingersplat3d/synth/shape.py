@@ -159,8 +159,8 @@ def _section(phi: np.ndarray, params: FingerParams) -> np.ndarray:
     return np.stack([y, z], axis=-1)
 
 
-def make_finger_surface(params: FingerParams, body_rows: int = 260, cap_rows: int = 110,
-                        cols: int = 360) -> FingerSurface:
+def make_finger_surface(params: FingerParams, body_rows: int = 180, cap_rows: int = 80,
+                        cols: int = 240) -> FingerSurface:
     """Sample the finger surface, triangulate it (closed: tip pole and base disc) and add skin coordinates."""
     # Axial stations: uniform along the body, uniform in angle over the cap (denser near the pole).
     body_len = params.length - params.cap

@@ -1,0 +1,189 @@
+"""``fs3d``: the command line. Thin: parses arguments, calls the library, reports errors in one line."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from . import __version__
+from .errors import FS3DError, InputError
+
+__all__ = ["main", "build_parser"]
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must look like 640x512, got {text!r}") from None
+    return width, height
+
+
+def _angles(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"angles must be comma-separated degrees like -30,0,30, got {text!r}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fs3d",
+        description="fingersplat3d: 3D fingerprints from 2-3 uncalibrated photos of a finger.",
+        epilog="Run 'fs3d COMMAND --help' for the options of each command.",
+    )
+    parser.add_argument("--version", action="version", version=f"fingersplat3d {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    synth = commands.add_parser(
+        "synth", help="generate synthetic 3D fingers photographed by a rig, with exact ground truth",
+        description="Generate procedural 3D fingertips with fingerprint ridges and photograph them with a "
+                    "capture rig. Writes one capture folder per finger: images/, masks/, depth/ (camera-frame "
+                    "z in mm), cameras.json, minutiae.json (3D and per-view pixels), mesh.ply, manifest.json. "
+                    "Deterministic in --seed.")
+    synth.add_argument("output", type=Path, help="capture folder to write (with --count > 1: a parent folder)")
+    synth.add_argument("--rig", default="uwa", choices=("uwa", "cfpose", "ring"),
+                       help="uwa: 3 cameras at -45/0/+45 deg, finger horizontal, gray 1280x1024; "
+                            "cfpose: one camera, finger rolled/pitched per shot, RGB 1024x1280; "
+                            "ring: cameras at --angles (default: uwa)")
+    synth.add_argument("--seed", type=int, default=0, help="random seed of the first finger (default 0)")
+    synth.add_argument("--count", type=int, default=1, help="number of fingers (seeds seed..seed+count-1)")
+    synth.add_argument("--size", type=_size, help="image size WxH (default: the rig's)")
+    synth.add_argument("--focal", type=float, help="focal length in pixels (default: ~36 mm of finger across the long side)")
+    synth.add_argument("--angles", type=_angles, help="ring rig: camera angles in degrees around the finger axis, e.g. -60,-20,20,60")
+    synth.add_argument("--poses", type=int, default=10, help="cfpose rig: number of shots (default 10)")
+    synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
+    colour = synth.add_mutually_exclusive_group()
+    colour.add_argument("--rgb", dest="gray", action="store_false", default=None, help="colour images")
+    colour.add_argument("--gray", dest="gray", action="store_true", help="grayscale images")
+    synth.add_argument("--bits", type=int, default=8, choices=(8, 16), help="image bit depth (default 8)")
+    synth.add_argument("--no-noise", action="store_true", help="no sensor noise and no blur")
+    synth.add_argument("--specular", type=float, help="highlight strength (default 0.12; 0 = matte)")
+    synth.add_argument("--overwrite", action="store_true", help="replace existing output folders")
+    synth.set_defaults(run=_run_synth)
+
+    info = commands.add_parser("info", help="describe a capture folder or a dataset folder",
+                               description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds.")
+    info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder or image files")
+    info.add_argument("--json", action="store_true", help="machine-readable output")
+    info.set_defaults(run=_run_info)
+
+    preview = commands.add_parser("preview", help="save a contact-sheet picture of a capture",
+                                  description="Save a PNG with, for each view, the photo (ground-truth minutiae drawn: "
+                                              "endings red, bifurcations blue), the mask and the depth map.")
+    preview.add_argument("capture", type=Path, help="capture folder")
+    preview.add_argument("-o", "--output", type=Path, help="PNG to write (default: CAPTURE/preview.png)")
+    preview.add_argument("--tile-width", type=int, default=480, help="width of each tile in pixels")
+    preview.set_defaults(run=_run_preview)
+    return parser
+
+
+def _run_synth(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .io.capture import write_capture
+    from .synth import Appearance, SynthConfig, synthesize
+
+    if args.count < 1:
+        raise InputError(f"--count must be at least 1, got {args.count}")
+    appearance = Appearance()
+    if args.no_noise:
+        appearance = replace(appearance, noise=0.0, blur_px=0.0)
+    if args.specular is not None:
+        appearance = replace(appearance, specular=args.specular)
+    config = SynthConfig(rig=args.rig, size=args.size, focal=args.focal, angles=args.angles, poses=args.poses,
+                         pattern=args.pattern, appearance=appearance, gray=args.gray)
+    seeds = range(args.seed, args.seed + args.count)
+    targets = [args.output] if args.count == 1 else [args.output / f"{args.rig}_{seed:05d}" for seed in seeds]
+    if not args.overwrite:
+        for target in targets:
+            if target.exists() and (not target.is_dir() or any(target.iterdir())):
+                raise InputError(f"{target}: already exists and is not empty (use --overwrite to replace it)")
+    progress = tqdm(list(zip(seeds, targets)), desc="fs3d synth", unit="finger", disable=args.count == 1 and None)
+    for seed, target in progress:
+        start = time.perf_counter()
+        result = synthesize(seed, config)
+        write_capture(result.capture, target, minutiae=result.minutiae, mesh=result.surface.to_open3d(),
+                      overwrite=args.overwrite, image_bits=args.bits,
+                      extra_manifest={"timing_s": {**result.seconds, "total": time.perf_counter() - start}})
+        if args.count == 1:
+            visible = {name: sum(m["visible"] for m in entries) for name, entries in result.minutiae["views"].items()}
+            print(f"wrote {target}: {len(result.capture)} views, {result.capture.metadata['pattern_class']}, "
+                  f"{len(result.minutiae['minutiae_3d'])} minutiae (visible per view: {visible}) "
+                  f"in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _describe(capture) -> dict:
+    views = [{"name": v.name, "size": f"{v.width}x{v.height}", "channels": v.channels,
+              "mask": v.mask is not None, "camera": v.camera is not None, "depth": v.depth is not None}
+             for v in capture.views]
+    keys = ("dataset", "rig", "seed", "pattern_class", "ridge_period_mm", "units", "subject", "finger", "capture")
+    return {"views": views, **{k: capture.metadata[k] for k in keys if k in capture.metadata}}
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    from .io.capture import capture_files, is_capture_folder, read_capture
+    from .io.minutiae import read_minutiae
+
+    paths = args.path
+    if len(paths) == 1 and is_capture_folder(paths[0]):
+        capture = read_capture(paths[0])
+        report = {"path": str(paths[0]), "kind": "capture folder", **_describe(capture)}
+        files = capture_files(paths[0])
+        if files.minutiae is not None:
+            minutiae = read_minutiae(files.minutiae)
+            report["minutiae"] = len(minutiae.get("minutiae_3d", []))
+            report["visible_minutiae"] = {k: sum(e["visible"] for e in v) for k, v in minutiae.get("views", {}).items()}
+        captures = [report]
+    else:
+        from .io.datasets import load_any
+
+        captures = [{"kind": "dataset capture", **_describe(c)} for c in load_any(paths)]
+    if args.json:
+        print(json.dumps(captures, indent=2))
+    else:
+        for report in captures:
+            head = {k: v for k, v in report.items() if k != "views"}
+            print(", ".join(f"{k}: {v}" for k, v in head.items()))
+            for view in report["views"]:
+                flags = [k for k in ("mask", "camera", "depth") if view[k]]
+                print(f"  {view['name']}: {view['size']}, {'gray' if view['channels'] == 1 else 'RGB'}"
+                      + (f", with {', '.join(flags)}" if flags else ""))
+    return 0
+
+
+def _run_preview(args: argparse.Namespace) -> int:
+    from .io.capture import capture_files, read_capture
+    from .io.images import write_image
+    from .io.minutiae import read_minutiae
+    from .viz import contact_sheet
+
+    capture = read_capture(args.capture)
+    files = capture_files(args.capture)
+    minutiae = read_minutiae(files.minutiae) if files.minutiae is not None else None
+    sheet = contact_sheet(capture, minutiae, tile_width=args.tile_width)
+    output = args.output or args.capture / "preview.png"
+    write_image(output, sheet.astype("float32") / 255.0)
+    print(f"wrote {output}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except (FS3DError, FileExistsError, FileNotFoundError) as error:
+        print(f"fs3d {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fs3d: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
