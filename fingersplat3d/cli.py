@@ -53,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--count", type=int, default=1, help="number of fingers (seeds seed..seed+count-1)")
     synth.add_argument("--size", type=_size, help="image size WxH (default: the rig's)")
     synth.add_argument("--focal", type=float, help="focal length in pixels (default: ~36 mm of finger across the long side)")
-    synth.add_argument("--angles", type=_angles, help="ring rig: camera angles in degrees around the finger axis, e.g. -60,-20,20,60")
+    synth.add_argument("--angles", type=_angles, help="ring rig: camera angles in degrees around the finger axis, written with = when the first is negative: --angles=-60,-20,20,60")
     synth.add_argument("--poses", type=int, default=10, help="cfpose rig: number of shots (default 10)")
     synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
     colour = synth.add_mutually_exclusive_group()
@@ -180,6 +180,9 @@ def main(argv: list[str] | None = None) -> int:
     except (FS3DError, FileExistsError, FileNotFoundError) as error:
         print(f"fs3d {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into head & co.
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("fs3d: interrupted", file=sys.stderr)
         return 130

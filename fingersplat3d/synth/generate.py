@@ -42,6 +42,9 @@ class SynthConfig:
     """Skin and sensor; ``rgb`` is forced on for cfpose unless ``gray`` is set."""
     gray: bool | None = None
     """Force grayscale (True) or RGB (False); default: uwa/ring gray, cfpose RGB."""
+    mesh_detail: float = 1.0
+    """Scale of the surface grid (1.0: 180+80 rows x 240 columns, ~62k vertices). The depth maps are
+    exact for whatever mesh is used, and that mesh is the one exported; smaller ships smaller files."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,9 +67,11 @@ def _validate(config: SynthConfig) -> None:
     if config.focal is not None and not (np.isfinite(config.focal) and config.focal > 0):
         raise InputError(f"focal length must be a positive number of pixels, got {config.focal}")
     if config.rig == "ring" and not config.angles:
-        raise InputError("the ring rig needs --angles, e.g. -30,0,30")
+        raise InputError("the ring rig needs camera angles, e.g. --angles=-30,0,30")
     if config.rig == "cfpose" and not 1 <= config.poses <= 100:
         raise InputError(f"cfpose poses must be between 1 and 100, got {config.poses}")
+    if not 0.1 <= config.mesh_detail <= 4.0:
+        raise InputError(f"mesh detail must lie within 0.1..4, got {config.mesh_detail}")
     low, high = config.period_mm
     if not 0.2 <= low <= high <= 1.0:
         raise InputError(f"ridge period range must lie within 0.2..1.0 mm, got {config.period_mm}")
@@ -81,7 +86,9 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     params = random_finger_params(rng)
     pattern_class = config.pattern if config.pattern != "random" else str(rng.choice(PATTERN_CLASSES, p=[0.1, 0.6, 0.3]))
     period = float(rng.uniform(*config.period_mm))
-    surface = make_finger_surface(params)
+    detail = config.mesh_detail
+    surface = make_finger_surface(params, max(8, round(180 * detail)), max(6, round(80 * detail)),
+                                  max(16, round(240 * detail)))
     seconds["shape"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
@@ -113,7 +120,7 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     metadata = {
         "generator": "fs3d synth", "seed": int(seed), "rig": config.rig, "units": "mm",
         "pattern_class": pattern_class, "ridge_period_mm": period,
-        "finger": asdict(params), "appearance": asdict(appearance),
+        "finger_shape": asdict(params), "appearance": asdict(appearance),
         "poses": {view.name: view.pose for view in rig},
         "lights_world": {view.name: [float(x) for x in view.light_world] for view in rig},
     }

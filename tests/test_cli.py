@@ -1,0 +1,87 @@
+"""The fs3d command line: help, synth/info/preview end to end, one-line errors with exit code 2."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fingersplat3d.cli import main
+from fingersplat3d.io import read_capture, read_image, read_minutiae
+
+
+def test_console_entry_point_help_lists_subcommands():
+    out = subprocess.run([sys.executable, "-m", "fingersplat3d.cli", "--help"], capture_output=True, text=True, check=True)
+    for command in ("synth", "info", "preview"):
+        assert command in out.stdout
+
+
+@pytest.mark.parametrize("command", ["synth", "info", "preview"])
+def test_each_subcommand_explains_itself(command, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    assert len(capsys.readouterr().out) > 200
+
+
+def test_synth_info_preview_end_to_end(tmp_path, capsys):
+    out = tmp_path / "finger"
+    assert main(["synth", str(out), "--size", "160x128", "--seed", "3", "--bits", "16"]) == 0
+    capture = read_capture(out)
+    assert capture.names == ["left", "center", "right"] and capture.has_cameras
+    assert all(v.depth is not None and v.mask is not None for v in capture.views)
+    assert read_minutiae(out / "minutiae.json")["minutiae_3d"]
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["metadata"]["seed"] == 3 and manifest["metadata"]["units"] == "mm"
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report[0]["minutiae"] > 0
+    assert main(["preview", str(out), "-o", str(tmp_path / "sheet.png")]) == 0
+    sheet = read_image(tmp_path / "sheet.png")
+    assert sheet.ndim == 3 and sheet.shape[0] > 100
+
+
+def test_synth_count_writes_one_folder_per_finger(tmp_path):
+    assert main(["synth", str(tmp_path / "many"), "--count", "2", "--rig", "ring", "--angles=-30,30",
+                 "--size", "96x80", "--seed", "7"]) == 0
+    folders = sorted(p.name for p in (tmp_path / "many").iterdir())
+    assert folders == ["ring_00007", "ring_00008"]
+    assert read_capture(tmp_path / "many" / "ring_00008").names == ["v0", "v1"]
+
+
+def test_existing_output_is_not_overwritten(tmp_path, capsys):
+    out = tmp_path / "finger"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    assert main(["synth", str(out), "--size", "96x80"]) == 2
+    err = capsys.readouterr().err
+    assert str(out) in err and "--overwrite" in err and err.count("\n") == 1
+    assert (out / "keep.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["info", "does/not/exist"], "does/not/exist"),
+    (["preview", "does/not/exist"], "does/not/exist"),
+    (["synth", "x", "--rig", "ring"], "angles"),
+    (["synth", "x", "--count", "0"], "--count"),
+])
+def test_bad_input_is_one_clear_sentence(argv, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_bad_size_is_an_argparse_error(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["synth", "x", "--size", "640by512"])
+    assert exit_info.value.code == 2
+    assert "640x512" in capsys.readouterr().err
+
+
+def test_pure_modules_do_not_import_open3d():
+    code = ("import sys, fingersplat3d.scene, fingersplat3d.synth.ridges, fingersplat3d.synth.shape, "
+            "fingersplat3d.io.images; assert 'open3d' not in sys.modules and 'torch' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
