@@ -73,6 +73,8 @@ def capture_point_cloud(capture: Capture, voxel_mm: float | None = None, stride:
             cloud += view_point_cloud(view, stride=stride, estimate_normals=True)
     if voxel_mm:
         cloud = cloud.voxel_down_sample(voxel_mm)
+        if cloud.has_normals():  # voxel averaging shortens normals: make them unit again
+            cloud.normalize_normals()
     return cloud
 
 

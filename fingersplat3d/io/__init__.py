@@ -6,6 +6,7 @@ from .datasets import UWAGroup, find_uwa_groups, load_any, load_cfpose, load_ima
 from .depth import depth_colormap, read_depth, write_depth, write_depth_preview
 from .images import IMAGE_SUFFIXES, image_bit_depth, read_image, read_mask, write_image, write_mask
 from .minutiae import read_minutiae, validate_minutiae, write_minutiae
+from .reconstruction import DepthFiles, depth_legend_picture, write_fused_cloud, write_report, write_view_depth
 
 __all__ = [
     "atomic_dir", "atomic_path",
@@ -15,4 +16,5 @@ __all__ = [
     "read_minutiae", "write_minutiae", "validate_minutiae",
     "CaptureFiles", "capture_files", "is_capture_folder", "read_capture", "write_capture",
     "UWAGroup", "find_uwa_groups", "load_uwa", "load_cfpose", "load_image_folder", "load_any",
+    "DepthFiles", "depth_legend_picture", "write_fused_cloud", "write_report", "write_view_depth",
 ]

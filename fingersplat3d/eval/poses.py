@@ -1,0 +1,117 @@
+"""Camera pose errors that do not depend on the world frame or its scale.
+
+A reconstruction from uncalibrated photos fixes its world frame and scale arbitrarily, so poses
+are compared pair by pair: for views ``i < j`` the relative pose ``T_i T_j^-1`` (``world_to_cam``
+4x4, so it maps camera ``j`` coordinates to camera ``i`` coordinates) has rotation
+``R_ij = R_i R_j^T`` and translation ``t_ij = t_i - R_ij t_j``. Both are unchanged by a rigid
+change of world frame; ``t_ij`` scales with the world, so only its direction is compared.
+
+Pairs are ordered ``(0, 1), (0, 2), ..., (0, N-1), (1, 2), ...`` (see :func:`view_pairs`).
+Pure numpy: no Open3D, no files.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["rotation_angle_deg", "vector_angle_deg", "view_pairs", "relative_rotation_errors",
+           "translation_direction_errors"]
+
+
+def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray | float:
+    """Geodesic angle in degrees, in [0, 180], between rotations ``R_a`` and ``R_b`` (``[..., 3, 3]``).
+
+    The angle of ``R = R_a R_b^T`` is ``atan2(|skew(R)|, trace(R) - 1)`` where ``skew(R)`` is
+    the vector ``(R32 - R23, R13 - R31, R21 - R12)`` (= ``2 sin(theta) axis``) and
+    ``trace(R) - 1 = 2 cos(theta)``. Unlike ``arccos((trace - 1) / 2)``, which loses half the
+    digits near 0 and 180 degrees and needs clipping, this is accurate to rounding over the whole
+    range (1e-8 rad comes back as 1e-8 rad) and accepts slightly non-orthonormal input.
+    A scalar for single matrices, an array for stacks (broadcasting over leading axes).
+    """
+    R_a = np.asarray(R_a, np.float64)
+    R_b = np.asarray(R_b, np.float64)
+    if R_a.shape[-2:] != (3, 3) or R_b.shape[-2:] != (3, 3):
+        raise ValueError(f"rotations must be [..., 3, 3], got {R_a.shape} and {R_b.shape}")
+    R = R_a @ np.swapaxes(R_b, -1, -2)
+    skew = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    cosine_part = np.trace(R, axis1=-2, axis2=-1) - 1.0
+    angle = np.degrees(np.arctan2(np.linalg.norm(skew, axis=-1), cosine_part))
+    return float(angle) if angle.ndim == 0 else angle
+
+
+def vector_angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray | float:
+    """Angle in degrees between vectors ``[..., 3]`` via ``atan2(|a x b|, a . b)``; NaN if either is zero."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    cross = np.linalg.norm(np.cross(a, b), axis=-1)
+    dot = np.sum(a * b, axis=-1)
+    zero = (np.linalg.norm(a, axis=-1) == 0) | (np.linalg.norm(b, axis=-1) == 0)
+    angle = np.where(zero, np.nan, np.degrees(np.arctan2(cross, dot)))
+    return float(angle) if angle.ndim == 0 else angle
+
+
+def view_pairs(count: int) -> np.ndarray:
+    """``[P, 2]`` index pairs ``i < j`` for ``count`` views, in the order the error functions use."""
+    i, j = np.triu_indices(count, k=1)
+    return np.stack([i, j], axis=1)
+
+
+def _poses(poses: Sequence[np.ndarray] | np.ndarray, name: str) -> np.ndarray:
+    stack = np.asarray(poses, np.float64)
+    if stack.ndim != 3 or stack.shape[1:] != (4, 4):
+        raise ValueError(f"{name} must be a list of 4x4 world_to_cam matrices, got shape {stack.shape}")
+    if not np.all(np.isfinite(stack)):
+        raise ValueError(f"{name} contains NaN or Inf")
+    return stack
+
+
+def _relative(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Relative rotations ``[P, 3, 3]`` and translations ``[P, 3]`` of every pair ``i < j``."""
+    pairs = view_pairs(len(poses))
+    R, t = poses[:, :3, :3], poses[:, :3, 3]
+    R_i, R_j = R[pairs[:, 0]], R[pairs[:, 1]]
+    R_ij = R_i @ np.swapaxes(R_j, -1, -2)
+    t_ij = t[pairs[:, 0]] - np.einsum("pab,pb->pa", R_ij, t[pairs[:, 1]])
+    return R_ij, t_ij
+
+
+def _both(pred_world_to_cam, gt_world_to_cam) -> tuple[np.ndarray, np.ndarray]:
+    pred = _poses(pred_world_to_cam, "pred_world_to_cam")
+    gt = _poses(gt_world_to_cam, "gt_world_to_cam")
+    if len(pred) != len(gt):
+        raise ValueError(f"{len(pred)} predicted poses but {len(gt)} ground-truth poses")
+    return pred, gt
+
+
+def relative_rotation_errors(pred_world_to_cam: Sequence[np.ndarray] | np.ndarray,
+                             gt_world_to_cam: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+    """``[P]`` degrees: for each pair ``i < j`` the angle between predicted and true ``R_i R_j^T``.
+
+    Inputs are ``N`` ``world_to_cam`` 4x4 matrices each (lists or ``[N, 4, 4]``), in the same
+    view order. Zero when the prediction equals the truth up to any similarity of the world.
+    """
+    pred, gt = _both(pred_world_to_cam, gt_world_to_cam)
+    if len(pred) < 2:
+        return np.zeros(0)
+    return np.atleast_1d(rotation_angle_deg(_relative(pred)[0], _relative(gt)[0]))
+
+
+def translation_direction_errors(pred_world_to_cam: Sequence[np.ndarray] | np.ndarray,
+                                 gt_world_to_cam: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+    """``[P]`` degrees: for each pair ``i < j`` the angle between predicted and true ``t_ij`` directions.
+
+    Scale-free (the direction of the baseline seen from camera ``i``). A pair whose cameras
+    coincide (zero baseline) in either input has no direction: its entry is NaN.
+    """
+    pred, gt = _both(pred_world_to_cam, gt_world_to_cam)
+    if len(pred) < 2:
+        return np.zeros(0)
+    baselines = []
+    for poses in (pred, gt):
+        t_ij = _relative(poses)[1]
+        # A baseline at rounding level of the camera distances is a zero baseline, not a direction.
+        size = max(1.0, float(np.linalg.norm(poses[:, :3, 3], axis=1).max()))
+        t_ij[np.linalg.norm(t_ij, axis=1) <= 1e-9 * size] = 0.0
+        baselines.append(t_ij)
+    return np.atleast_1d(vector_angle_deg(*baselines))

@@ -1,0 +1,318 @@
+"""The end-to-end ``fs3d fuse`` geometry run: pointmaps → pairwise → global alignment → ICP → fusion.
+
+Configured by dataclasses (:class:`FuseConfig`); returns a :class:`Reconstruction` in memory, which
+:func:`write_reconstruction` writes as the reconstruction folder of the design (fused.ply,
+cameras.json, depth/, mesh.ply, report.json).
+"""
+from __future__ import annotations
+
+import platform
+import resource
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from . import __version__
+from .align.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .align.icp import ICPConfig, refine_poses
+from .errors import InputError
+from .scene import Camera, Capture, View
+
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS"]
+
+MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
+
+
+@dataclass(frozen=True)
+class FuseConfig:
+    """Settings of ``fs3d fuse`` (geometry)."""
+
+    backend: str = "prior"
+    """Pointmap backend name (``prior`` needs no weights)."""
+    matcher: str = "minutiae"
+    """Correspondence method between views (see :mod:`fingersplat3d.align.features`)."""
+    dense_matches: bool = True
+    """Grow guided grid matches around the minutiae matches (3-4x more correspondences)."""
+    global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
+    """Joint optimisation of poses, focal and depth."""
+    icp: bool = True
+    """Refine poses with Open3D ICP after the global alignment."""
+    icp_config: ICPConfig = field(default_factory=ICPConfig)
+    """ICP settings."""
+    min_confidence: float = 0.05
+    """Pointmap confidence below which pixels are left out of the fused cloud."""
+    voxel: float = 0.002
+    """Voxel of the fused cloud, as a fraction of its extent (0 = keep every point)."""
+    px_per_mm: float | None = None
+    """Metric hint: image pixels per millimetre at the finger (first view)."""
+    finger_width_mm: float | None = None
+    """Metric hint: the finger's width in mm (used when px_per_mm is not given)."""
+    mesh: bool = False
+    """Also build a triangle mesh (Poisson, cleaned with pymeshlab)."""
+    seed: int = 0
+    """Seed of the random parts (RANSAC)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """What ``fuse`` produced, in memory."""
+
+    capture: Capture  # the input views, with the masks that were used
+    cameras: list[Camera]
+    depths: list[np.ndarray]  # [H, W] float32 per view, NaN off the finger
+    confidences: list[np.ndarray]
+    cloud: object  # open3d.geometry.PointCloud
+    units: str
+    scale_mm_per_unit: float | None
+    report: dict
+    mesh: object | None = None
+
+
+class _Stages:
+    """Per-stage wall time and peak memory for the report."""
+
+    def __init__(self) -> None:
+        self.records: dict[str, dict] = {}
+
+    @contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        yield
+        peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        self.records[name] = {"seconds": round(time.perf_counter() - start, 3), "peak_rss_mb": round(peak_kb / 1024, 1)}
+
+
+def _warn(report: dict, message: str) -> None:
+    report.setdefault("warnings", []).append(message)
+    print(f"fs3d fuse: warning: {message}", file=sys.stderr)
+
+
+def _with_masks(capture: Capture) -> Capture:
+    from .segment.masks import finger_mask
+
+    views = []
+    for view in capture.views:
+        mask = view.mask if view.mask is not None else finger_mask(view.image, name=view.name)
+        if mask.sum() < 16:
+            raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
+        views.append(view.with_(mask=mask))
+    return Capture(tuple(views), capture.metadata)
+
+
+def _pairs(capture: Capture, pointmaps, config: FuseConfig, report: dict) -> list[PairCorrespondences]:
+    from .align.features import match_views
+    from .align.pairwise import register_pair
+
+    rng = np.random.default_rng(config.seed)
+    pairs, records = [], []
+    views = capture.views
+    for a in range(len(views)):
+        for b in range(a + 1, len(views)):
+            record = {"a": views[a].name, "b": views[b].name}
+            if views[a].image.shape == views[b].image.shape and np.array_equal(views[a].image, views[b].image):
+                record.update(ok=False, reason="identical images: no parallax (monocular mode)")
+                records.append(record)
+                continue
+            matches = match_views(views[a].image, views[a].mask, views[b].image, views[b].mask, method=config.matcher,
+                                  densify=config.dense_matches and config.matcher == "minutiae")
+            registration = register_pair(pointmaps[a], pointmaps[b], matches, rng=rng)
+            record.update(matches=int(len(matches.uv_a)), inliers=int(registration.n_inliers),
+                          residual=float(registration.residual), ok=bool(registration.ok), reason=registration.reason)
+            records.append(record)
+            if registration.ok:
+                pairs.append(PairCorrespondences(a, b, registration.uv_a, registration.uv_b, registration.weight,
+                                                 registration.b_to_a.as_matrix()))
+    report["pairs"] = records
+    return pairs
+
+
+def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.ndarray, min_confidence: float):
+    from .geometry import points_to_cloud
+
+    valid = np.isfinite(depth) & (confidence >= min_confidence) & view.mask
+    pixels = np.argwhere(valid)[:, ::-1].astype(np.float64)
+    points = camera.unproject(pixels, depth[valid])
+    return points_to_cloud(points, view.image[valid]), valid
+
+
+def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict) -> float | None:
+    """Millimetres per reconstruction unit from a metric hint, or None."""
+    if config.px_per_mm:
+        depth = float(np.nanmedian(depths[0]))
+        return cameras[0].K[0, 0] / (config.px_per_mm * depth)
+    if config.finger_width_mm:
+        points = np.asarray(cloud.points)
+        centred = points - points.mean(0)
+        _, _, axes = np.linalg.svd(centred[:: max(1, len(points) // 20000)], full_matrices=False)
+        across = centred @ axes[1]  # second principal axis: across the finger
+        width = float(np.percentile(across, 99.5) - np.percentile(across, 0.5))
+        report["measured_width_units"] = width
+        return config.finger_width_mm / width
+    return None
+
+
+def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = False) -> Reconstruction:
+    """Recover cameras and one fused finger surface from the capture's images (cameras ignored)."""
+    from tqdm import tqdm
+
+    import open3d as o3d
+
+    from .pointmaps import get_backend
+
+    if len(capture) < MIN_VIEWS:
+        raise InputError("fs3d fuse needs at least one image")
+    stages = _Stages()
+    report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
+                    "settings": _jsonable(asdict(config)), "warnings": []}
+    bar = tqdm(total=6, desc="fs3d fuse", unit="stage", disable=not progress)
+
+    def step(name):
+        bar.set_postfix_str(name)
+        return stages(name)
+
+    with step("masks"):
+        capture = _with_masks(capture)
+    bar.update()
+    with step("pointmaps"):
+        backend = get_backend(config.backend)
+        pointmaps = backend.predict_views(capture.views)
+    bar.update()
+    with step("pairwise"):
+        pairs = _pairs(capture, pointmaps, config, report)
+    bar.update()
+    with step("global_alignment"):
+        alignment = global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], pairs,
+                                 config.global_align)
+    bar.update()
+    _check_alignment(capture, alignment, pairs, report)
+    cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])
+               for v, view in enumerate(capture.views)]
+    depths = [np.where(view.mask, alignment.depths[v], np.nan).astype(np.float32) for v, view in enumerate(capture.views)]
+    confidences = [pm.confidence for pm in pointmaps]
+    with step("icp"):
+        clouds = [_world_cloud(view, cameras[v], depths[v], confidences[v], config.min_confidence)[0]
+                  for v, view in enumerate(capture.views)]
+        aligned_views = [v for v in range(len(capture)) if alignment.aligned[v]]
+        if config.icp and len(aligned_views) >= 2:
+            root = alignment.tree[0][0] if alignment.tree else aligned_views[0]
+            icp = refine_poses([clouds[v] for v in aligned_views], config.icp_config, fixed=aligned_views.index(root))
+            for k, v in enumerate(aligned_views):
+                if icp.accepted[k]:
+                    cam_to_world = icp.corrections[k] @ cameras[v].cam_to_world
+                    cameras[v] = Camera(cameras[v].K, np.linalg.inv(cam_to_world), cameras[v].width, cameras[v].height)
+                    clouds[v].transform(icp.corrections[k])
+            report["icp"] = {capture.views[v].name: {"accepted": icp.accepted[k], "fitness": icp.fitness[k],
+                                                     "rmse": icp.rmse[k], "note": icp.notes[k]}
+                             for k, v in enumerate(aligned_views)}
+    bar.update()
+    with step("fusion"):
+        cloud = o3d.geometry.PointCloud()
+        for v in aligned_views or [0]:
+            cloud += clouds[v]
+        extent = float(np.linalg.norm(cloud.get_max_bound() - cloud.get_min_bound())) if len(cloud.points) else 0.0
+        if config.voxel > 0 and extent > 0:
+            cloud = cloud.voxel_down_sample(config.voxel * extent)
+        if len(cloud.points) < 10:
+            raise InputError("the fused point cloud is empty: no view produced usable depth")
+        cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=3.0)
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
+        _orient_outward(cloud, cameras, aligned_views or [0])
+        scale = _metric_scale(config, cameras, depths, cloud, report)
+        units = "arbitrary"
+        if scale is not None:
+            units = "mm"
+            cloud.scale(scale, center=np.zeros(3))
+            depths = [d * scale for d in depths]
+            cameras = [_scaled_camera(c, scale) for c in cameras]
+    bar.update()
+    mesh = None
+    if config.mesh:
+        from .mesh import mesh_from_cloud
+
+        with stages("mesh"):
+            mesh = mesh_from_cloud(cloud)
+    bar.close()
+    report.update(stages=stages.records, units=units, scale_mm_per_unit=scale,
+                  alignment={"residual_px": alignment.residual_px, "residual_rel3d": alignment.residual_rel3d,
+                             "focals_px": alignment.focals, "relief_scale": alignment.relief_scale,
+                             "spanning_tree": [[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
+                             "aligned": dict(zip(capture.names, alignment.aligned)), **report.get("alignment", {})},
+                  points=len(cloud.points))
+    return Reconstruction(capture, cameras, depths, confidences, cloud, units, scale, report, mesh)
+
+
+def _check_alignment(capture: Capture, alignment: GlobalAlignment, pairs, report: dict) -> None:
+    """Say so (report + stderr) when views could not be aligned or the fit is poor."""
+    status = {"ok": True}
+    missing = [capture.views[v].name for v in range(len(capture)) if not alignment.aligned[v]]
+    if len(capture) > 1 and missing:
+        status["ok"] = False
+        _warn(report, f"alignment failed for view(s) {', '.join(missing)}: no reliable correspondences with the "
+                      "others; their depth comes from the pointmap alone and they are left out of the fused cloud")
+    if len(capture) > 1 and not pairs:
+        status["mode"] = "monocular"
+        _warn(report, "no pair of views could be registered: each view's depth comes from its own pointmap "
+                      "(monocular mode)")
+    elif len(capture) == 1:
+        status["mode"] = "monocular"
+    if pairs and np.isfinite(alignment.residual_px) and alignment.residual_px > 3.0:
+        status["ok"] = False
+        _warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than 3 px): the cameras "
+                      "are probably wrong")
+    report["alignment"] = status
+
+
+def _orient_outward(cloud, cameras: list[Camera], views: list[int]) -> None:
+    """Flip normals that face away from every camera that saw the surface (skin faces the cameras)."""
+    points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
+    centres = np.stack([cameras[v].center for v in views])
+    towards = centres[None] - points[:, None]  # [N, V, 3]
+    best = np.max(np.einsum("nvk,nk->nv", towards, normals) / np.linalg.norm(towards, axis=-1), axis=1)
+    worst = np.min(np.einsum("nvk,nk->nv", towards, normals) / np.linalg.norm(towards, axis=-1), axis=1)
+    flip = np.abs(worst) > np.abs(best)
+    normals[flip] *= -1
+    cloud.normals = type(cloud.normals)(normals)
+
+
+def _scaled_camera(camera: Camera, scale: float) -> Camera:
+    pose = camera.world_to_cam.copy()
+    pose[:3, 3] *= scale
+    return Camera(camera.K, pose, camera.width, camera.height)
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def write_reconstruction(result: Reconstruction, folder: str | Path, overwrite: bool = False) -> Path:
+    """Write the reconstruction folder: fused.ply, cameras.json, depth/, mesh.ply, report.json."""
+    from .io.atomic import atomic_dir
+    from .io.cameras import write_cameras
+    from .io.reconstruction import write_fused_cloud, write_report, write_view_depth
+
+    folder = Path(folder)
+    started = time.perf_counter()
+    with atomic_dir(folder, overwrite=overwrite) as temporary:
+        write_fused_cloud(temporary / "fused.ply", result.cloud)
+        entries = [(view.name, result.capture.metadata.get("sources", {}).get(view.name, f"images/{view.name}.png"), camera)
+                   for view, camera in zip(result.capture.views, result.cameras)]
+        write_cameras(temporary / "cameras.json", entries, units=result.units, scale_mm_per_unit=result.scale_mm_per_unit)
+        for view, depth in zip(result.capture.views, result.depths):
+            write_view_depth(temporary, view.name, depth, units="mm" if result.units == "mm" else "arbitrary")
+        if result.mesh is not None:
+            from .mesh import write_mesh
+
+            write_mesh(temporary / "mesh.ply", result.mesh)
+        report = dict(result.report)
+        report["stages"] = {**report.get("stages", {}), "write": {"seconds": round(time.perf_counter() - started, 3)}}
+        write_report(temporary / "report.json", report)
+    return folder

@@ -1,0 +1,264 @@
+"""The ``prior`` backend: a finger-surface pointmap from one image's silhouette, no weights.
+
+A distal phalanx is close to a *generalised cylinder*: a cross-section (wider than high) swept
+along a nearly straight axis, shrinking over the fingertip cap. Seen from the side, each slice
+perpendicular to the axis projects to a chord of the silhouette whose length is the slice's
+width, and the visible half of the slice rises above that chord like a half ellipse. So:
+
+1. the silhouette is the view's mask when given, else :func:`~fingersplat3d.segment.masks.finger_mask`;
+2. the finger axis is the silhouette's principal direction (PCA of its pixels);
+3. at every 1-pixel station along the axis, the chord across the silhouette gives a half-width
+   ``w(s)`` and a centre ``c(s)``; chords cut by the image border are completed from their
+   neighbours (the finger goes on beyond the frame); both are median-filtered along the axis and
+   ``w^2`` is fitted by local quadratics (no 1-px terraces; exact on an ellipsoidal cap);
+4. a point above ``(s, t)`` (along, across the axis) has the relief
+   ``h = depth_ratio * sqrt(w(s)^2 - (t - c(s))^2)``: exact for any cross-section shape scaled
+   uniformly along the axis (a cylinder, and an ellipsoidal tip cap, rounded in both directions);
+5. that relief is ray cast through the guessed pinhole, focal ``f = focal_factor * max(W, H)`` and
+   principal point at the image centre (see :func:`finger_height`: off-axis rays see round the
+   finger's side and over its tip), and depth is ``z = f - h`` (so near the finger one unit is
+   about one pixel; units are arbitrary and the global alignment refines focal and scale),
+   points ``X = z K^-1 [u, v, 1]``;
+6. confidence is the facing ratio of the modelled surface, ``n_z = 1 / sqrt(1 + |grad h|^2)``,
+   ramped to 1 at ``confidence_knee``: 1 over the frontal part of the finger, small at the
+   silhouette rim and the fingertip, where depth is steepest and a pixel of outline error costs
+   the most depth; 0 outside the mask, finite everywhere.
+
+What a single silhouette cannot show is a tilt of the finger toward the camera (pitch, and the
+shear of a rolled section); it shows up as a ramp in the depth error, which the global
+alignment's smooth per-view correction can take up. The defaults, and this model against
+distance-transform inflation, are measured in ``tools/bench_prior.py`` on synthetic ground truth.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple, Sequence
+
+import numpy as np
+from scipy.ndimage import median_filter
+from scipy.signal import savgol_filter
+
+from ..errors import InputError
+from ..scene import View
+from ..segment.masks import finger_mask
+from .base import Pointmap, register_backend
+
+__all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
+
+PERSPECTIVE_ITERATIONS = 8  # fixed-point steps of the perspective ray cast (max change < 0.3 px after 8)
+MAX_RELIEF = 0.9  # relief cap, in focal lengths: keeps every point in front of the camera
+CONFIDENCE_FLOOR = 0.01  # every mask pixel keeps a point: confidence > 0 inside the mask
+
+
+class FingerHeight(NamedTuple):
+    """The inflated silhouette of one view."""
+
+    height: np.ndarray  # [H, W] float32 >= 0, pixels of relief toward the camera, 0 outside the mask
+    confidence: np.ndarray  # [H, W] float32 in [0, 1], 0 outside the mask
+    axis: np.ndarray  # [2] unit (du, dv) direction of the finger axis in the image
+
+
+@dataclass(frozen=True)
+class PriorBackend:
+    """Silhouette-prior pointmaps (see the module docstring)."""
+
+    name: ClassVar[str] = "prior"
+
+    focal_factor: float = 3.0
+    """Focal guess in units of the long image side. Contactless finger cameras frame the finger
+    closely (~30-40 mm across the long side at 100-150 mm): 2.5-5 x max(W, H); 3 sits in that range.
+    The depth relief is scale-free, so this mostly sets the perspective of the back-projection."""
+    depth_ratio: float = 0.95
+    """Visible relief over half the silhouette width. Human finger sections are wider than high
+    (height/width ~0.76-0.88) with the pad fuller than the nail side (~53-60 % of the height), so
+    the pad half seen from the front rises ~0.8-1.05 half-widths. Measured (3D error after a
+    similarity fit, ``tools/bench_prior.py``): best at 0.95 for frontal, 45-degree and rolled views
+    alike; the global alignment's relief factor corrects the rest per view."""
+    smoothing: float = 0.15
+    """Length of the along-axis filters of the chord widths and centres (median, then local
+    quadratic), as a fraction of the finger's median width; 0 turns them off."""
+    perspective: bool = True
+    """Ray cast the relief through the guessed pinhole (see :func:`finger_height`); False: orthographic."""
+    confidence_knee: float = 0.8
+    """Facing ratio ``n_z`` at and above which the confidence is 1; below it, it falls linearly.
+    Measured: the depth error (after scale, shift and tilt) grows about as ``1 / n_z``, from
+    0.04 mm where ``n_z > 0.9`` to 0.1 mm at 0.5 and 0.3 mm at the rim, so a confidence
+    proportional to ``n_z`` weighs residuals by their expected accuracy; ~2/3 of a finger's
+    pixels face the camera better than 0.8 and get 1."""
+
+    def __post_init__(self) -> None:
+        checks = (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
+                  ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))
+        for field_name, low, high, low_allowed in checks:
+            value = getattr(self, field_name)
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            if not (math.isfinite(number) and (number >= low if low_allowed else number > low) and number <= high):
+                interval = f"{'[' if low_allowed else '('}{low:g}, {'inf)' if high == math.inf else f'{high:g}]'}"
+                raise InputError(f"prior backend: {field_name} must be a finite number in {interval}, got {value!r}")
+
+    def predict_views(self, views: Sequence[View]) -> list[Pointmap]:
+        """One own-frame pointmap per view, on the view's pixel grid."""
+        return [self.predict_view(index, view) for index, view in enumerate(views)]
+
+    def predict_view(self, index: int, view: View) -> Pointmap:
+        mask = view.mask
+        if mask is None:
+            mask = finger_mask(view.image, name=f"view {view.name!r}")
+        elif not mask.any():
+            raise InputError(f"view {view.name!r}: the mask is empty")
+        focal = self.focal_factor * max(view.width, view.height)
+        relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
+                               focal if self.perspective else None)
+        points = height_to_points(relief.height, mask, focal)
+        return Pointmap(index, points, relief.confidence, float(focal))
+
+
+register_backend("prior", PriorBackend)
+
+
+def height_to_points(height: np.ndarray, mask: np.ndarray, focal: float) -> np.ndarray:
+    """Camera-frame points ``[H, W, 3]`` float32 for depth ``z = focal - height`` (NaN off the mask).
+
+    The reference depth ``z0 = focal`` puts the finger where one unit is about one pixel; the
+    relief is shrunk by ``z0 / focal = 1``. Principal point at ``((W - 1) / 2, (H - 1) / 2)``.
+    A relief beyond ``0.9 * focal`` (a finger closer than its own thickness: only reachable with
+    focal guesses far below the image size) is capped there, so every point stays in front.
+    """
+    rows, cols = height.shape
+    depth = np.where(mask, focal - np.minimum(height, MAX_RELIEF * focal), np.nan).astype(np.float32)
+    x = (np.arange(cols, dtype=np.float32) - (cols - 1) / 2.0) / np.float32(focal)
+    y = (np.arange(rows, dtype=np.float32) - (rows - 1) / 2.0) / np.float32(focal)
+    points = np.empty((rows, cols, 3), np.float32)
+    np.multiply(depth, x[None, :], out=points[..., 0])
+    np.multiply(depth, y[:, None], out=points[..., 1])
+    points[..., 2] = depth
+    return points
+
+
+def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float = 0.15,
+                  confidence_knee: float = 0.8, focal: float | None = None) -> FingerHeight:
+    """Relief (pixels) and confidence of a finger silhouette under the swept-section model.
+
+    With ``focal`` (pixels) the relief is ray cast in perspective: the model is the swept
+    surface standing on the image plane moved out to ``z0 = focal`` (silhouette where it is
+    seen), and pixel ``p``'s ray meets it above ``q = c + (p - c) * (1 - h(q) / focal)``
+    (``c`` the principal point at the image centre), solved by fixed-point iteration from
+    ``h(p)``: where the finger covers the image centre the relief grows toward ``c``, so the
+    iterates rise monotonically to the first hit without overshooting. Off the
+    optical axis the camera sees round the finger's side and over its tip, so the relief
+    seen at a pixel is the model's a little further from the image centre. Without ``focal``
+    the relief is orthographic, ``h(p)``.
+    """
+    mask = np.asarray(mask, bool)
+    rows, cols = mask.shape
+    v, u = np.nonzero(mask)
+    axis, origin = _principal_axis(u, v)
+    normal = np.array([-axis[1], axis[0]])
+    # Coordinates along (s) and across (t) the axis, for the mask pixels only.
+    du, dv = u - origin[0], v - origin[1]
+    s = du * axis[0] + dv * axis[1]
+    t = du * normal[0] + dv * normal[1]
+    on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
+    sections = _sections(s, t, on_border, smoothing)
+    relief = sections.height(s, t) * depth_ratio
+    if focal is not None:
+        centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0]) - origin
+        s_c, t_c = float(centre @ axis), float(centre @ normal)
+        for _ in range(PERSPECTIVE_ITERATIONS):
+            shrink = 1.0 - np.minimum(relief, MAX_RELIEF * focal) / focal
+            relief = sections.height(s_c + (s - s_c) * shrink, t_c + (t - t_c) * shrink) * depth_ratio
+    height = np.zeros((rows, cols), np.float32)
+    height[v, u] = relief
+    return FingerHeight(height, _confidence(height, mask, confidence_knee), axis)
+
+
+@dataclass(frozen=True, eq=False)
+class _Sections:
+    """The swept section: chord half-width and centre per 1-px station along the axis."""
+
+    start: float  # s at the start of station 0
+    half_width: np.ndarray  # [N] pixels
+    centre: np.ndarray  # [N] t of the chord centre
+
+    def height(self, s: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Unit-ratio relief ``sqrt(w(s)^2 - (t - c(s))^2)``, 0 off the section (pixels)."""
+        station = s - self.start
+        knots = np.arange(self.half_width.size) + 0.5
+        w = np.interp(station, knots, self.half_width)
+        c = np.interp(station, knots, self.centre)
+        outside = (station < -0.5) | (station > self.half_width.size + 0.5)
+        return np.where(outside, 0.0, np.sqrt(np.maximum(w * w - (t - c) ** 2, 0.0)))
+
+
+def _principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit direction of largest spread of the pixels and their centroid (x axis when undefined)."""
+    centre = np.array([u.mean(), v.mean()])
+    if u.size < 2:
+        return np.array([1.0, 0.0]), centre
+    du, dv = u - centre[0], v - centre[1]
+    cov = np.array([[np.dot(du, du), np.dot(du, dv)], [np.dot(du, dv), np.dot(dv, dv)]]) / u.size
+    values, vectors = np.linalg.eigh(cov)
+    if values[1] - values[0] <= 1e-9 * max(values[1], 1e-12):
+        return np.array([1.0, 0.0]), centre  # round blob: any direction is an axis
+    return vectors[:, 1], centre
+
+
+def _sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float) -> _Sections:
+    """Per-station (1 px along the axis) chord half-width and centre, completed and smoothed."""
+    s0 = float(s.min())
+    index = np.floor(s - s0).astype(np.int64)
+    count = int(index.max()) + 1
+    low = np.full(count, np.inf)
+    high = np.full(count, -np.inf)
+    np.minimum.at(low, index, t)
+    np.maximum.at(high, index, t)
+    present = np.isfinite(low)
+    # A chord end on the image border is cut by the frame, not by the finger's outline.
+    border_low = np.full(count, np.inf)
+    border_high = np.full(count, -np.inf)
+    np.minimum.at(border_low, index[on_border], t[on_border])
+    np.maximum.at(border_high, index[on_border], t[on_border])
+    cut_low = present & (border_low <= low + 1.0)
+    cut_high = present & (border_high >= high - 1.0)
+    half_width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)  # +0.5: pixels have extent
+    centre = np.where(present, 0.5 * (high + low), np.nan)
+    whole = present & ~cut_low & ~cut_high
+    cut = present & ~whole
+    stations = np.arange(count)
+    if cut.any() and whole.any():
+        # Complete the width from the nearest whole chords and keep the seen end where it is
+        # (a chord cut at both ends takes its centre from its neighbours too).
+        half_width[cut] = np.maximum(np.interp(stations[cut], stations[whole], half_width[whole]), half_width[cut])
+        seen_high = cut & cut_low & ~cut_high
+        seen_low = cut & cut_high & ~cut_low
+        centre[seen_high] = high[seen_high] + 0.5 - half_width[seen_high]
+        centre[seen_low] = low[seen_low] - 0.5 + half_width[seen_low]
+        both = cut & cut_low & cut_high
+        centre[both] = np.interp(stations[both], stations[whole], centre[whole])
+    if not present.all():  # a thin diagonal mask can leave a station empty
+        half_width = np.interp(stations, stations[present], half_width[present])
+        centre = np.interp(stations, stations[present], centre[present])
+    window = int(round(smoothing * 2.0 * float(np.median(half_width))))
+    if window >= 3 and count >= 3:
+        window = min(window | 1, count - (1 - count % 2))  # odd, at most the station count
+        half_width = median_filter(half_width, size=window, mode="nearest")
+        centre = median_filter(centre, size=window, mode="nearest")
+        # Outline pixels quantise the chords into 1-px steps, which would print as depth terraces.
+        # A local quadratic of w^2 removes them and is exact over an ellipsoidal cap (w^2 is
+        # quadratic in s there) as well as over a straight or tapered body.
+        if count > window:
+            half_width = np.sqrt(np.maximum(savgol_filter(half_width ** 2, window, 2, mode="interp"), 0.25))
+            centre = savgol_filter(centre, window, 2, mode="interp")
+    return _Sections(s0, half_width, centre)
+
+
+def _confidence(height: np.ndarray, mask: np.ndarray, knee: float) -> np.ndarray:
+    """Facing ratio of the relief surface, ramped to 1 at ``knee``; floor inside, 0 outside."""
+    grad_v, grad_u = np.gradient(height) if min(height.shape) > 1 else (np.zeros_like(height),) * 2
+    facing = 1.0 / np.sqrt(1.0 + grad_u * grad_u + grad_v * grad_v)
+    ramp = np.clip(facing / knee, CONFIDENCE_FLOOR, 1.0) if knee > 0 else np.ones_like(facing)
+    return np.where(mask, ramp, 0.0).astype(np.float32)

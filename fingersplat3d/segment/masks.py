@@ -1,0 +1,178 @@
+"""Classical finger segmentation: a finger photographed on a dark background.
+
+:func:`finger_mask` works on one image (grayscale ``H x W`` or RGB ``H x W x 3``, float in [0, 1],
+any exposure: 16-bit data that only uses the bottom of the range works too):
+
+1. brightness = the brightest channel (skin is bright in at least one channel on a dark
+   background), smoothed by a small Gaussian so ridge texture and sensor noise average out;
+2. a rough two-class split by Otsu's threshold on a subsample of the pixels (a few hot pixels
+   cannot move a histogram split) gives the background level and noise and the skin level;
+3. the threshold is the midpoint between the background and the skin *at the silhouette*, read
+   in a thin band inside a first, low-threshold mask and averaged locally, since the lit side's
+   rim is brighter than the shaded side's. The midpoint of a blurred step is where the edge is,
+   so the outline lands on the true silhouette on both sides; a plain Otsu split (between the
+   background and the *mean* skin) cuts off the darker rim;
+4. skin darker than that midpoint (valleys, the crease, the shaded side) still clears a noise
+   floor; the noise-floor mask, eroded by 2 px (more than its outward bias), fills such notches;
+5. morphological close then open (kernel ~0.5 % of the image size), the outline smoothed by a
+   sub-pixel blur of the mask, the largest connected component, holes filled.
+
+Measured on the synthetic rigs (``tools/bench_prior.py``): IoU >= 0.9994 against the ground-truth
+mask on every view; ~10 ms at 640x512 and ~45 ms at 1280x1024 on the project's 2-core machine.
+
+It fails with an :class:`~fingersplat3d.errors.InputError` naming the image when there is no
+finger (an empty, constant or pure-noise image) or no background (the finger would cover
+nearly the whole frame).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["finger_mask", "mask_iou"]
+
+SMOOTH_SIGMA_PX = 1.0  # Gaussian pre-smoothing (pixels): averages noise, keeps the edge in place
+MIN_CONTRAST_SIGMAS = 6.0  # skin must stand this many background-noise sigmas above the background
+MAX_COVERAGE = 0.95  # a "finger" covering more of the frame than this means there is no background
+MIN_AREA_PX = 4  # fewer finger pixels than this is no finger
+LOW_MASK_EROSION_PX = 2  # more than the outward bias of the noise-floor edge (~1 px after blurs)
+EDGE_BAND = (1.5, 4.0)  # band inside the rough mask (px from its edge) where the edge skin level is read
+
+
+def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
+    """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` in [0, 1])."""
+    brightness = _brightness(image, name)
+    height, width = brightness.shape
+    smooth = cv2.GaussianBlur(brightness, (0, 0), SMOOTH_SIGMA_PX, borderType=cv2.BORDER_REPLICATE)
+    floor, threshold = _thresholds(smooth, name)
+    # Skin darker than the midpoint (valleys, a crease, the shaded side) still clears the noise
+    # floor; that low mask, eroded past its outward bias, fills such notches without moving edges.
+    low = cv2.erode((smooth > floor).view(np.uint8), _disc(LOW_MASK_EROSION_PX), borderType=cv2.BORDER_REPLICATE)
+    mask = (smooth > threshold) | low.view(bool)
+    radius = max(1, round(0.005 * max(height, width)))
+    kernel = _disc(radius)
+    mask8 = mask.view(np.uint8)
+    # Close then open; the border is replicated so a finger cut by the frame stays cut straight.
+    mask8 = cv2.morphologyEx(mask8, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE)
+    mask8 = cv2.morphologyEx(mask8, cv2.MORPH_OPEN, kernel, borderType=cv2.BORDER_REPLICATE)
+    mask = _largest_component(_smooth_outline(mask8.view(bool), radius).view(np.uint8))
+    if mask is None or mask.sum() < min(MIN_AREA_PX, height * width):
+        raise InputError(f"{name}: no finger found (nothing stands out from the dark background)")
+    mask = _fill_holes(mask)
+    if mask.mean() > MAX_COVERAGE:
+        raise InputError(f"{name}: the finger covers {100 * mask.mean():.0f}% of the image, "
+                         "so there is no background to separate it from")
+    return mask
+
+
+def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean masks of the same shape (1.0 when both are empty)."""
+    a, b = np.asarray(a, bool), np.asarray(b, bool)
+    if a.shape != b.shape:
+        raise ValueError(f"masks have different shapes {a.shape} and {b.shape}")
+    union = np.count_nonzero(a | b)
+    return 1.0 if union == 0 else np.count_nonzero(a & b) / union
+
+
+def _brightness(image: np.ndarray, name: str) -> np.ndarray:
+    """Validated float32 ``[H, W]`` brightness: the image itself, or its brightest channel."""
+    array = np.asarray(image)
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[..., 0]
+    elif array.ndim == 3 and array.shape[2] in (3, 4):  # RGB(A): the brightest colour channel
+        array = np.maximum(np.maximum(array[..., 0], array[..., 1]), array[..., 2])
+    if array.ndim != 2 or array.size == 0:
+        raise InputError(f"{name}: expected an HxW or HxWx3 image, got shape {np.shape(image)}")
+    array = np.asarray(array, np.float32)
+    if not np.isfinite(array.sum(dtype=np.float64)):  # NaN and Inf survive a sum
+        raise InputError(f"{name}: the image contains NaN or Inf")
+    return np.ascontiguousarray(array)
+
+
+def _disc(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
+    """The noise floor and the per-pixel midpoint between background and silhouette-edge skin."""
+    step = max(1, int(np.sqrt(smooth.size / 65536)))  # statistics from ~65k pixels suffice
+    sample = smooth[::step, ::step].ravel()
+    low, high = float(sample.min()), float(sample.max())
+    if not high > low:
+        raise InputError(f"{name}: no finger found (the image is constant)")
+    split = _otsu(sample, low, high)
+    background, skin = sample[sample <= split], sample[sample > split]
+    if background.size < (1.0 - MAX_COVERAGE) * sample.size:
+        raise InputError(f"{name}: the image is bright almost everywhere, so there is no background "
+                         "to separate a finger from")
+    bg_level = float(np.median(background))
+    bg_noise = 1.4826 * float(np.median(np.abs(background - bg_level)))
+    skin_level = float(np.median(skin))
+    contrast = skin_level - bg_level
+    if contrast <= MIN_CONTRAST_SIGMAS * bg_noise or contrast < 1e-3 * max(high, 1e-12):
+        raise InputError(f"{name}: no finger found (nothing stands out from the background noise)")
+    floor = bg_level + max(MIN_CONTRAST_SIGMAS * bg_noise, 0.05 * contrast)
+    # A first mask from a low threshold keeps the darker skin at the silhouette; the skin level
+    # at the silhouette is read in a thin band inside it. That level differs between the lit and
+    # the shaded side, so it is averaged locally (normalised Gaussian over ~1.5 % of the image
+    # size), on a grid a few times coarser than the image, which is all such a smooth map needs.
+    rough = (smooth > max(floor, bg_level + 0.15 * contrast)).view(np.uint8)
+    inside = cv2.distanceTransform(rough, cv2.DIST_L2, 3)
+    band = ((inside >= EDGE_BAND[0]) & (inside <= EDGE_BAND[1])).astype(np.float32)
+    if np.count_nonzero(band) < 16:
+        return floor, np.full_like(smooth, max(floor, bg_level + 0.5 * contrast))
+    height, width = smooth.shape
+    sigma = max(2.0, 0.015 * max(height, width))
+    factor = max(1, int(sigma // 2))
+    coarse = (max(1, -(-width // factor)), max(1, -(-height // factor)))
+    weight = cv2.resize(band, coarse, interpolation=cv2.INTER_AREA)
+    total = cv2.resize(band * smooth, coarse, interpolation=cv2.INTER_AREA)
+    weight = cv2.GaussianBlur(weight, (0, 0), sigma / factor)
+    total = cv2.GaussianBlur(total, (0, 0), sigma / factor)
+    edge_level = float(total.sum() / max(weight.sum(), 1e-12))  # where no band is near
+    local = np.where(weight > 1e-4, total / np.maximum(weight, 1e-4), edge_level).astype(np.float32)
+    midpoint = np.maximum(floor, 0.5 * (bg_level + local))
+    return floor, cv2.resize(midpoint, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def _otsu(values: np.ndarray, low: float, high: float, bins: int = 256) -> float:
+    """Otsu's threshold of ``values`` (a 256-bin histogram over ``[low, high]``)."""
+    histogram, edges = np.histogram(values, bins=bins, range=(low, high))
+    p = histogram.astype(np.float64) / histogram.sum()
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    omega = np.cumsum(p)
+    mu = np.cumsum(p * centres)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        between = (mu[-1] * omega - mu) ** 2 / (omega * (1.0 - omega))
+    between[~np.isfinite(between)] = -1.0
+    return float(edges[int(np.argmax(between)) + 1])
+
+
+def _largest_component(mask8: np.ndarray) -> np.ndarray | None:
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask8, connectivity=8)
+    if count < 2:
+        return None
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    return labels == largest
+
+
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    """Fill background regions that do not reach the image border."""
+    count, labels = cv2.connectedComponents((~mask).view(np.uint8), connectivity=4)
+    if count <= 2:
+        return mask
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    outside = np.isin(labels, border[border > 0])
+    return ~outside
+
+
+def _smooth_outline(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Round off pixel staircases: blur the mask a little and cut it at one half."""
+    sigma = 0.5 * radius
+    if sigma < 0.75:
+        return mask
+    blurred = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    smoothed = blurred > 0.5
+    return smoothed if smoothed.any() else mask

@@ -1,0 +1,150 @@
+"""fs3d fuse geometry: cameras and depth recovered from uncalibrated synthetic photos, outputs per contract."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fingersplat3d.cli import main
+from fingersplat3d.errors import InputError
+from fingersplat3d.eval import depth_errors, relative_rotation_errors
+from fingersplat3d.io import read_cameras, read_capture, read_depth
+from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
+from fingersplat3d.scene import Capture, View
+from fingersplat3d.synth import SynthConfig, synthesize
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def uwa():
+    return synthesize(1, SynthConfig(size=(640, 512))).capture
+
+
+@pytest.fixture(scope="module")
+def reconstruction(uwa):
+    return fuse(uwa)
+
+
+def _flat_baseline(view):
+    return depth_errors(np.where(view.mask, 1.0, np.nan), view.depth, view.mask, align="none").mae
+
+
+def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):
+    report = reconstruction.report
+    assert report["alignment"]["ok"] and all(report["alignment"]["aligned"].values())
+    errors = relative_rotation_errors([c.world_to_cam for c in reconstruction.cameras],
+                                      [v.camera.world_to_cam for v in uwa.views])
+    # The 45-degree pairs: measured 3-7 degrees (see the README's table); a broken alignment is tens.
+    assert errors[0] < 12 and errors[2] < 12
+    for view, depth in zip(uwa.views, reconstruction.depths):
+        assert depth.shape == view.depth.shape
+        error = depth_errors(depth, view.depth, view.mask)
+        assert error.coverage > 0.95
+        # A flat finger is ~1.2 mm off after scale and shift; the fuse measured 0.07-0.45 mm.
+        assert error.mae < 0.6
+
+
+def test_reconstruction_folder_contract(reconstruction, tmp_path):
+    import open3d as o3d
+    import pymeshlab
+
+    out = write_reconstruction(reconstruction, tmp_path / "rec")
+    cloud = o3d.io.read_point_cloud(str(out / "fused.ply"))
+    assert len(cloud.points) > 1000 and cloud.has_colors() and cloud.has_normals()
+    meshset = pymeshlab.MeshSet()
+    meshset.load_new_mesh(str(out / "fused.ply"))
+    assert meshset.current_mesh().vertex_number() == len(cloud.points)
+    cameras = read_cameras(out / "cameras.json")
+    assert cameras.units == "arbitrary" and cameras.names == reconstruction.capture.names
+    for view in reconstruction.capture.views:
+        depth = read_depth(out / "depth" / f"{view.name}.npy")
+        assert depth.shape == (view.height, view.width) and depth.dtype == np.float32
+        assert np.isnan(depth[~view.mask]).all() and np.isfinite(depth[view.mask]).mean() > 0.95
+        assert (out / "depth" / f"{view.name}.png").is_file() and (out / "depth" / f"{view.name}_color.png").is_file()
+    report = json.loads((out / "report.json").read_text())
+    for stage in ("masks", "pointmaps", "pairwise", "global_alignment", "icp", "fusion"):
+        assert report["stages"][stage]["seconds"] >= 0 and report["stages"][stage]["peak_rss_mb"] > 0
+    assert report["units"] == "arbitrary" and report["alignment"]["residual_px"] < 3
+
+
+def test_metric_hints_make_millimetres(uwa):
+    truth_px_per_mm = uwa.views[0].camera.K[0, 0] / np.nanmedian(uwa.views[0].depth)
+    for config in (FuseConfig(px_per_mm=truth_px_per_mm, icp=False), FuseConfig(finger_width_mm=16.0, icp=False)):
+        result = fuse(uwa, config)
+        assert result.units == "mm" and result.scale_mm_per_unit > 0
+        extent = np.ptp(np.asarray(result.cloud.points), axis=0)
+        assert 8 < np.sort(extent)[1] < 30  # the finger's width comes out in millimetres
+
+
+def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
+    out = tmp_path / "rec"
+    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(out), "--mesh"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    import pymeshlab
+
+    meshset = pymeshlab.MeshSet()
+    meshset.load_new_mesh(str(out / "mesh.ply"))
+    assert meshset.current_mesh().face_number() > 1000
+    # The same images given as a list of files.
+    files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
+    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--no-icp"]) == 0
+
+
+def test_cli_fuse_refuses_bad_input(tmp_path, capsys):
+    assert main(["fuse", str(tmp_path / "missing"), "-o", str(tmp_path / "o")]) == 2
+    assert "missing" in capsys.readouterr().err
+    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(tmp_path / "o"), "--px-per-mm", "-3"]) == 2
+    assert "--px-per-mm" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+# Numerical extremes: results stay finite, or fail with a clear message.
+
+def _finite_result(result):
+    points = np.asarray(result.cloud.points)
+    assert len(points) > 0 and np.isfinite(points).all()
+    assert all(np.isfinite(c.K).all() and np.isfinite(c.world_to_cam).all() for c in result.cameras)
+    for depth, view in zip(result.depths, result.capture.views):
+        assert np.isfinite(depth[view.mask]).any() and not np.isinf(depth).any()
+
+
+def test_identical_views_are_monocular_mode(uwa):
+    view = uwa["center"]
+    twins = Capture((View("a", view.image), View("b", view.image)))
+    result = fuse(twins)
+    _finite_result(result)
+    assert result.report["alignment"]["mode"] == "monocular"
+    assert result.report["pairs"][0]["reason"].startswith("identical images")
+    assert depth_errors(result.depths[0], view.depth, view.mask).mae < 0.6
+
+
+def test_views_90_degrees_apart_fail_loudly_but_finitely(uwa, capsys):
+    result = fuse(Capture((uwa["left"].with_(camera=None, depth=None), uwa["right"].with_(camera=None, depth=None))))
+    _finite_result(result)
+    assert "warning" in capsys.readouterr().err
+    assert not result.report["alignment"]["ok"] or result.report["alignment"].get("mode") == "monocular"
+
+
+def test_single_image_and_tiny_images():
+    tiny = synthesize(2, SynthConfig(size=(48, 40)))
+    result = fuse(Capture(tiny.capture.views[:1]))
+    _finite_result(result)
+    result = fuse(tiny.capture)  # too small to match ridges: monocular fallback, still finite
+    _finite_result(result)
+
+
+def test_few_pixel_mask_is_a_clear_error(uwa):
+    view = uwa["center"]
+    mask = np.zeros_like(view.mask)
+    mask[100:103, 100:103] = True
+    with pytest.raises(InputError, match="center"):
+        fuse(Capture((view.with_(mask=mask), uwa["left"])))
+
+
+def test_extreme_focal_guesses_stay_finite(uwa):
+    from fingersplat3d.pointmaps.prior import PriorBackend
+
+    for factor in (1e-2, 1e3):
+        pointmaps = PriorBackend(focal_factor=factor).predict_views(uwa.views)
+        assert all(np.isfinite(pm.points[pm.valid]).all() for pm in pointmaps)
