@@ -8,7 +8,7 @@ import pytest
 from fingersplat3d.cli import main
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval import depth_errors, relative_rotation_errors
-from fingersplat3d.io import read_cameras, read_capture, read_depth
+from fingersplat3d.io import read_cameras, read_depth
 from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
 from fingersplat3d.scene import Capture, View
 from fingersplat3d.synth import SynthConfig, synthesize
@@ -24,10 +24,6 @@ def uwa():
 @pytest.fixture(scope="module")
 def reconstruction(uwa):
     return fuse(uwa)
-
-
-def _flat_baseline(view):
-    return depth_errors(np.where(view.mask, 1.0, np.nan), view.depth, view.mask, align="none").mae
 
 
 def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):

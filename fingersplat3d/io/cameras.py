@@ -23,6 +23,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from .jsonio import read_json
 from ..errors import input_error
 from ..scene import Camera
 from .atomic import atomic_path
@@ -124,14 +125,7 @@ def _parse_view(entry: Any, index: int, path: Path) -> tuple[str, str, Camera]:
 def read_cameras(path: str | Path) -> CameraSet:
     """Read and validate a ``cameras.json``; every problem is an ``InputError`` naming the file."""
     path = Path(path)
-    if not path.is_file():
-        raise input_error(path, "file not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise input_error(path, f"not valid JSON ({error.msg} at line {error.lineno}, column {error.colno})") from None
-    except (UnicodeDecodeError, OSError) as error:
-        raise input_error(path, f"cannot be read ({error})") from None
+    data = read_json(path)
     if not isinstance(data, dict):
         raise input_error(path, "must hold a JSON object with \"units\" and \"views\"")
     for key in ("units", "views"):

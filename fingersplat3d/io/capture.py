@@ -36,6 +36,7 @@ import numpy as np
 
 from ..errors import InputError, input_error
 from ..scene import Capture, View
+from .jsonio import read_json
 from .ply import write_mesh_ply
 from .atomic import atomic_dir
 from .cameras import read_cameras, write_cameras
@@ -195,15 +196,6 @@ def write_capture(capture: Capture, folder: str | Path, *, minutiae: dict | None
 
 # ----------------------------------------------------------------------------------------- reading
 
-def _load_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise input_error(path, f"not valid JSON ({error.msg} at line {error.lineno}, column {error.colno})") from None
-    except (UnicodeDecodeError, OSError) as error:
-        raise input_error(path, f"cannot be read ({error})") from None
-
-
 def _relative(folder: Path, manifest: Path, value: Any, where: str) -> Path:
     """A path from the manifest, which must stay inside the capture folder."""
     if not isinstance(value, str) or not value:
@@ -216,7 +208,7 @@ def _relative(folder: Path, manifest: Path, value: Any, where: str) -> Path:
 
 def _parse_manifest(folder: Path, path: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     """Views, ``files`` and ``metadata`` of a validated manifest."""
-    data = _load_json(path)
+    data = read_json(path)
     if not isinstance(data, dict):
         raise input_error(path, "manifest must be a JSON object")
     if data.get("format") != CAPTURE_FORMAT:

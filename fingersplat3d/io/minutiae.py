@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .jsonio import read_json
 from ..errors import input_error
 from .atomic import atomic_path
 
@@ -165,12 +166,5 @@ def write_minutiae(path: str | Path, data: dict) -> Path:
 def read_minutiae(path: str | Path) -> dict:
     """Read and validate a ``minutiae.json``; returns the dict (``views`` always present)."""
     path = Path(path)
-    if not path.is_file():
-        raise input_error(path, "file not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise input_error(path, f"not valid JSON ({error.msg} at line {error.lineno}, column {error.colno})") from None
-    except (UnicodeDecodeError, OSError) as error:
-        raise input_error(path, f"cannot be read ({error})") from None
+    data = read_json(path)
     return validate_minutiae(data, path)
