@@ -81,7 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     hint.add_argument("--px-per-mm", type=float, help="metric hint: pixels per millimetre at the finger")
     hint.add_argument("--finger-width-mm", type=float, help="metric hint: the finger's width in millimetres")
     fuse.add_argument("--mesh", action="store_true", help="also write mesh.ply (Poisson, cleaned)")
-    fuse.add_argument("--no-icp", action="store_true", help="skip the ICP refinement")
+    fuse.add_argument("--icp", action="store_true",
+                      help="refine poses with Open3D ICP (guarded; off by default: on near-cylindrical fingers "
+                           "it slides about the axis, see the README)")
     fuse.add_argument("--iterations", type=int, help="global alignment Adam iterations (default 300)")
     fuse.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -151,7 +153,7 @@ def _run_fuse(args: argparse.Namespace) -> int:
     captures = load_any(args.inputs)
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
-    config = FuseConfig(backend=args.backend, matcher=args.matcher, icp=not args.no_icp, px_per_mm=args.px_per_mm,
+    config = FuseConfig(backend=args.backend, matcher=args.matcher, icp=args.icp, px_per_mm=args.px_per_mm,
                         finger_width_mm=args.finger_width_mm, mesh=args.mesh, seed=args.seed)
     if args.iterations is not None:
         config = replace(config, global_align=replace(config.global_align, iterations=args.iterations))

@@ -40,8 +40,10 @@ class FuseConfig:
     """Grow guided grid matches around the minutiae matches (3-4x more correspondences)."""
     global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
     """Joint optimisation of poses, focal and depth."""
-    icp: bool = True
-    """Refine poses with Open3D ICP after the global alignment."""
+    icp: bool = False
+    """Refine poses with Open3D ICP after the global alignment. Off by default: a finger is nearly a
+    cylinder, and ICP slides about its axis: on exact geometry it moved views by 1-16 degrees
+    (tools/bench_fuse.py, README); its guard rejects such updates, so it only costs time."""
     icp_config: ICPConfig = field(default_factory=ICPConfig)
     """ICP settings."""
     min_confidence: float = 0.05

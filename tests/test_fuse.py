@@ -66,7 +66,7 @@ def test_reconstruction_folder_contract(reconstruction, tmp_path):
 
 def test_metric_hints_make_millimetres(uwa):
     truth_px_per_mm = uwa.views[0].camera.K[0, 0] / np.nanmedian(uwa.views[0].depth)
-    for config in (FuseConfig(px_per_mm=truth_px_per_mm, icp=False), FuseConfig(finger_width_mm=16.0, icp=False)):
+    for config in (FuseConfig(px_per_mm=truth_px_per_mm), FuseConfig(finger_width_mm=16.0)):
         result = fuse(uwa, config)
         assert result.units == "mm" and result.scale_mm_per_unit > 0
         extent = np.ptp(np.asarray(result.cloud.points), axis=0)
@@ -84,7 +84,7 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     assert meshset.current_mesh().face_number() > 1000
     # The same images given as a list of files.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
-    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--no-icp"]) == 0
+    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp"]) == 0
 
 
 def test_cli_fuse_refuses_bad_input(tmp_path, capsys):
