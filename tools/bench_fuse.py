@@ -1,4 +1,4 @@
-"""Benchmark ``fs3d fuse`` geometry (default ``FuseConfig``: backend ``prior``, ICP on) against ground truth.
+"""Benchmark ``fs3d fuse`` geometry (default ``FuseConfig``: backend ``prior``, ICP off) against ground truth.
 
     python tools/bench_fuse.py [--seeds 5] [--big-seeds 3] [--settings KEY,...] [--out FILE.md] [--quick]
 
@@ -10,7 +10,7 @@ Settings (rows), each fused with the default ``FuseConfig()`` unless it is an ab
   the most negative roll, the frontal ``p1`` and the one with the most positive roll, in that order
   (the paper picks the smallest and the two largest angles);
 * ``uwa3-1280``: uwa rig, 3 views, 1280x1024 (``--big-seeds`` seeds, default 3: the slow row);
-* ablations on ``uwa3-640`` (same captures): ``icp=False`` and ``dense_matches=False``.
+* ablations on ``uwa3-640`` (same captures): ``icp=True`` and ``dense_matches=False``.
 
 The views handed to ``fuse`` keep the image and the ground-truth mask (as a ``fs3d synth`` capture
 folder ships them) and lose their camera and depth; the ground truth is used only to score:
@@ -37,7 +37,6 @@ import json
 import math
 import os
 import pickle
-import platform
 import resource
 import statistics
 import subprocess
@@ -46,6 +45,7 @@ import tempfile
 import time
 import traceback
 from pathlib import Path
+from benchmachine import machine  # tools/ is on sys.path when run as a script
 
 # Synthetic captures: key -> (SynthConfig keyword arguments, view selection)
 SYNTH = {
@@ -63,7 +63,7 @@ SETTINGS = {
     "cfpose3-512": dict(label="cfpose 3 views 512x640", synth="cfpose-512", views="cfpose-extremes", fuse={},
                         big=False, ablation=False),
     "uwa3-1280": dict(label="uwa 3 views 1280x1024", synth="uwa-1280", views="all", fuse={}, big=True, ablation=False),
-    "uwa3-640-noicp": dict(label="uwa 3 views 640x512, ICP off", synth="uwa-640", views="all", fuse={"icp": False},
+    "uwa3-640-icp": dict(label="uwa 3 views 640x512, ICP on", synth="uwa-640", views="all", fuse={"icp": True},
                            big=False, ablation=True),
     "uwa3-640-nodense": dict(label="uwa 3 views 640x512, dense_matches off", synth="uwa-640", views="all",
                              fuse={"dense_matches": False}, big=False, ablation=True),
@@ -126,7 +126,6 @@ def _finite(value):
 
 def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
     clock = time.perf_counter()
-    import numpy as np
     import open3d  # noqa: F401  (imports off the clock)
     import scipy.spatial  # noqa: F401
     import torch  # noqa: F401
@@ -218,30 +217,6 @@ def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
 # ----------------------------------------------------------------------------------------------
 # Tables
 # ----------------------------------------------------------------------------------------------
-
-def machine() -> dict:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import numpy
-    try:
-        import open3d
-        o3d_version = open3d.__version__
-    except Exception:  # pragma: no cover
-        o3d_version = "n/a"
-    try:
-        import torch
-        torch_version = torch.__version__
-    except Exception:  # pragma: no cover
-        torch_version = "n/a"
-    return {"cpu": model, "cores": os.cpu_count(), "load": os.getloadavg(), "python": platform.python_version(),
-            "numpy": numpy.__version__, "open3d": o3d_version, "torch": torch_version, "kernel": platform.release()}
-
 
 def med(values):
     values = [v for v in values if v is not None and math.isfinite(v)]
@@ -342,7 +317,7 @@ def tables(results: list[dict], info: dict, args, wall_s: float, load_end) -> st
     ablations = [r for r in results if SETTINGS[r["key"]]["ablation"]]
 
     # --- accuracy ---
-    lines += ["## Accuracy (default `FuseConfig()`: backend `prior`, dense matches, ICP on)", "",
+    lines += ["## Accuracy (default `FuseConfig()`: backend `prior`, dense matches, ICP off)", "",
               "| setting | seeds (failed) | rot. err. median, all pairs (°) | adjacent pairs | median, adjacent (°) | "
               "median, outer pair (°) | max (°) | baseline dir. err. median (°) | depth MAE median (mm) | max (mm) | "
               "frontal median / max (mm) | oblique median / max (mm) | pairs registered | alignment ok | "

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import statistics
 import subprocess
@@ -31,6 +30,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from benchmachine import machine  # tools/ is on sys.path when run as a script
 
 RIG_SPECS = {
     # key: (label, SynthConfig keyword arguments, image-minutiae match test?)
@@ -266,25 +266,6 @@ def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
 # ----------------------------------------------------------------------------------------------
 # Driver and tables
 # ----------------------------------------------------------------------------------------------
-
-def machine() -> dict:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import numpy
-    try:
-        import open3d
-        o3d_version = open3d.__version__
-    except Exception:  # pragma: no cover
-        o3d_version = "n/a"
-    return {"cpu": model, "cores": os.cpu_count(), "load": os.getloadavg(), "python": platform.python_version(),
-            "numpy": numpy.__version__, "open3d": o3d_version, "kernel": platform.release()}
-
 
 def fmt(value: float, digits: int = 2) -> str:
     return f"{value:.{digits}f}"
