@@ -126,7 +126,7 @@ def _run_synth(args: argparse.Namespace) -> int:
         for target in targets:
             if target.exists() and (not target.is_dir() or any(target.iterdir())):
                 raise InputError(f"{target}: already exists and is not empty (use --overwrite to replace it)")
-    progress = tqdm(list(zip(seeds, targets)), desc="fs3d synth", unit="finger", disable=args.count == 1 and None)
+    progress = tqdm(list(zip(seeds, targets)), desc="fs3d synth", unit="finger", disable=None if args.count == 1 else False)  # one finger: only on a terminal
     for seed, target in progress:
         start = time.perf_counter()
         result = synthesize(seed, config)

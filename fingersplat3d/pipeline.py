@@ -170,7 +170,7 @@ def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = F
         raise InputError("fs3d fuse needs at least one image")
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
-                    "settings": _jsonable(asdict(config)), "warnings": []}
+                    "settings": asdict(config), "warnings": []}
     bar = tqdm(total=6, desc="fs3d fuse", unit="stage", disable=not progress)
 
     def step(name):
@@ -274,9 +274,8 @@ def _orient_outward(cloud, cameras: list[Camera], views: list[int]) -> None:
     points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
     centres = np.stack([cameras[v].center for v in views])
     towards = centres[None] - points[:, None]  # [N, V, 3]
-    best = np.max(np.einsum("nvk,nk->nv", towards, normals) / np.linalg.norm(towards, axis=-1), axis=1)
-    worst = np.min(np.einsum("nvk,nk->nv", towards, normals) / np.linalg.norm(towards, axis=-1), axis=1)
-    flip = np.abs(worst) > np.abs(best)
+    cosines = np.einsum("nvk,nk->nv", towards, normals) / np.linalg.norm(towards, axis=-1)
+    flip = np.abs(cosines.min(axis=1)) > np.abs(cosines.max(axis=1))
     normals[flip] *= -1
     cloud.normals = type(cloud.normals)(normals)
 
@@ -285,14 +284,6 @@ def _scaled_camera(camera: Camera, scale: float) -> Camera:
     pose = camera.world_to_cam.copy()
     pose[:3, 3] *= scale
     return Camera(camera.K, pose, camera.width, camera.height)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    return value
 
 
 def write_reconstruction(result: Reconstruction, folder: str | Path, overwrite: bool = False) -> Path:

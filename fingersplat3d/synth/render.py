@@ -103,12 +103,7 @@ class FingerScene:
         self._o3d = o3d
         self._weight = skin_weight(surface.pattern_ab, pattern, surface.params.crease)
         grad_a, grad_b = np.gradient(pattern.ridges.astype(np.float64), pattern.spacing_mm)
-        self._grad_a = RidgePattern(grad_a.astype(np.float32), pattern.spacing_mm, pattern.period_mm,
-                                    pattern.pattern_class, pattern.minutiae, pattern.cores, pattern.deltas,
-                                    pattern.half_width_mm)
-        self._grad_b = RidgePattern(grad_b.astype(np.float32), pattern.spacing_mm, pattern.period_mm,
-                                    pattern.pattern_class, pattern.minutiae, pattern.cores, pattern.deltas,
-                                    pattern.half_width_mm)
+        self._grad_a, self._grad_b = grad_a.astype(np.float32), grad_b.astype(np.float32)
         blotch_rng = np.random.default_rng(seed)
         self._blotch_k = blotch_rng.normal(size=(6, 3)) * (2 * np.pi / blotch_rng.uniform(3.0, 12.0, size=(6, 1)))
         self._blotch_phase = blotch_rng.uniform(0, 2 * np.pi, size=6)
@@ -143,8 +138,8 @@ class FingerScene:
         ab = interp(np.nan_to_num(surface.pattern_ab))
         weight = interp(self._weight[:, None])[:, 0]
         height = self.pattern.sample(ab[:, 0], ab[:, 1]) * weight
-        slope = (self._grad_a.sample(ab[:, 0], ab[:, 1])[:, None] * interp(surface.tangent_a)
-                 + self._grad_b.sample(ab[:, 0], ab[:, 1])[:, None] * interp(surface.tangent_b)) * weight[:, None]
+        slope = (self.pattern.sample(ab[:, 0], ab[:, 1], self._grad_a)[:, None] * interp(surface.tangent_a)
+                 + self.pattern.sample(ab[:, 0], ab[:, 1], self._grad_b)[:, None] * interp(surface.tangent_b)) * weight[:, None]
         bumped = _normalize(normal - appearance.relief_mm * slope)
 
         light = _normalize(np.asarray(light_world, np.float64)[None])

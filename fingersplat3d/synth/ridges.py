@@ -81,13 +81,15 @@ class RidgePattern:
         """``a`` of the last grid row."""
         return (self.ridges.shape[0] - 1) * self.spacing_mm
 
-    def sample(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
-        """Bilinear lookup of ``ridges`` at points ``(a_mm, b_mm)`` (broadcast, any shape).
+    def sample(self, a_mm: np.ndarray, b_mm: np.ndarray, field: np.ndarray | None = None) -> np.ndarray:
+        """Bilinear lookup of ``ridges`` (or of another ``field`` on the same grid, e.g. its gradient)
+        at points ``(a_mm, b_mm)`` (broadcast, any shape).
 
         Points outside the grid take the value of the nearest edge. Returns float32.
         """
         a, b = np.broadcast_arrays(np.asarray(a_mm, dtype=np.float64), np.asarray(b_mm, dtype=np.float64))
-        return _bilinear(self.ridges, a / self.spacing_mm, (b + self.half_width_mm) / self.spacing_mm)
+        grid = self.ridges if field is None else field
+        return _bilinear(grid, a / self.spacing_mm, (b + self.half_width_mm) / self.spacing_mm)
 
 
 def _bilinear(image: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
