@@ -1,0 +1,58 @@
+"""Quaternions (wxyz, as in the 3DGS PLY format) and Gaussian covariances, in torch.
+
+Pure math: no Open3D, no files. Quaternions need not be normalised; a zero quaternion is read as
+the identity rotation (finite values and gradients), so a degenerate parameter never poisons a fit.
+"""
+from __future__ import annotations
+
+import torch
+
+__all__ = ["normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion", "covariance_3d"]
+
+_TINY = 1e-12
+
+
+def normalize_quaternions(quats: torch.Tensor) -> torch.Tensor:
+    """``[..., 4]`` wxyz -> unit wxyz; a (near-)zero quaternion becomes the identity ``(1, 0, 0, 0)``."""
+    norm2 = (quats * quats).sum(-1, keepdim=True)
+    small = norm2 < _TINY
+    identity = torch.zeros_like(quats)
+    identity[..., 0] = 1.0
+    safe = torch.where(small, identity, quats)
+    return safe / torch.sqrt(torch.where(small, torch.ones_like(norm2), norm2))
+
+
+def quaternion_to_matrix(quats: torch.Tensor) -> torch.Tensor:
+    """``[..., 4]`` wxyz (any norm) -> ``[..., 3, 3]`` rotation matrices."""
+    w, x, y, z = normalize_quaternions(quats).unbind(-1)
+    return torch.stack([
+        torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def matrix_to_quaternion(matrices: torch.Tensor) -> torch.Tensor:
+    """``[..., 3, 3]`` rotations -> ``[..., 4]`` unit wxyz with ``w >= 0`` (Shepperd's method)."""
+    m = matrices
+    trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+    candidates = torch.stack([
+        torch.stack([1 + trace, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
+        torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
+                     m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
+        torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0],
+                     1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2], m[..., 1, 2] + m[..., 2, 1]], -1),
+        torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1],
+                     1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2]], -1),
+    ], -2)  # [..., 4 candidates, 4]; candidate k is 4*q*q_k, best conditioned where its k-th entry is largest
+    diagonal = torch.diagonal(candidates, dim1=-2, dim2=-1)
+    best = diagonal.argmax(-1, keepdim=True)
+    chosen = torch.gather(candidates, -2, best[..., None].expand(*best.shape, 4)).squeeze(-2)
+    quats = normalize_quaternions(chosen)
+    return torch.where(quats[..., :1] < 0, -quats, quats)
+
+
+def covariance_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
+    """``Sigma = R S S R^T`` from ``[N, 4]`` wxyz quaternions and ``[N, 3]`` standard deviations."""
+    rotation_scale = quaternion_to_matrix(quats) * scales[..., None, :]
+    return rotation_scale @ rotation_scale.transpose(-1, -2)
