@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import __version__
 from .errors import FS3DError, InputError
+from .splat.config import DEFAULT_PRESET, PRESETS, preset
 
 __all__ = ["main", "build_parser"]
 
@@ -75,12 +76,27 @@ def build_parser() -> argparse.ArgumentParser:
     fuse.add_argument("inputs", type=Path, nargs="+",
                       help="a capture folder, a folder of images, or image files (2-3 views of one finger)")
     fuse.add_argument("-o", "--output", type=Path, required=True, help="reconstruction folder to write")
-    fuse.add_argument("--backend", default="prior", help="pointmap backend (default: prior, needs no weights)")
+    fuse.add_argument("--backend", default="prior", choices=("prior", "dust3r"),
+                      help="pointmap backend: prior (default, needs no weights) or dust3r (needs --checkpoint)")
+    fuse.add_argument("--checkpoint", type=Path,
+                      help="dust3r backend: DUSt3R checkpoint file, e.g. DUSt3R_ViTLarge_BaseDecoder_512_dpt.pth "
+                           "(nothing is downloaded)")
+    fuse.add_argument("--device", default="auto",
+                      help="dust3r backend: auto (CUDA when available, default), cpu, cuda or cuda:N")
+    fuse.add_argument("--pair-batch", type=int, default=4, help="dust3r backend: image pairs per network batch (default 4)")
     fuse.add_argument("--matcher", default="minutiae", help="correspondence method between views: minutiae (default), sift, rootsift, akaze")
     hint = fuse.add_mutually_exclusive_group()
     hint.add_argument("--px-per-mm", type=float, help="metric hint: pixels per millimetre at the finger")
     hint.add_argument("--finger-width-mm", type=float, help="metric hint: the finger's width in millimetres")
     fuse.add_argument("--mesh", action="store_true", help="also write mesh.ply (Poisson, cleaned)")
+    splat = fuse.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
+    splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
+    splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
+                       help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
+    splat.add_argument("--splat-iterations", type=int, help="override the preset's optimisation steps")
+    splat.add_argument("--splat-budget-density", type=float, dest="splat_density",
+                       help="override the Gaussians per (ridge period/4)^2 of finger area")
+    splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
     fuse.add_argument("--icp", action="store_true",
                       help="refine poses with Open3D ICP (guarded; off by default: on near-cylindrical fingers "
                            "it slides about the axis, see the README)")
@@ -102,6 +118,23 @@ def build_parser() -> argparse.ArgumentParser:
     preview.add_argument("-o", "--output", type=Path, help="PNG to write (default: CAPTURE/preview.png)")
     preview.add_argument("--tile-width", type=int, default=480, help="width of each tile in pixels")
     preview.set_defaults(run=_run_preview)
+
+    render = commands.add_parser(
+        "render", help="render novel views of a fitted finger (gaussians.ply) at any angle",
+        description="Render new views of the Gaussian-splat model of a reconstruction folder written by "
+                    "'fs3d fuse': by default COUNT views at equal steps on the arc from the leftmost through "
+                    "the front to the rightmost input camera (the paper's 12), or the views at --angles "
+                    "(degrees about the finger axis, relative to the middle input camera). Writes "
+                    "renders/<name>.png, <name>_alpha.png, depth/<name>.npy (+ previews), cameras.json and "
+                    "contact_sheet.png.")
+    render.add_argument("reconstruction", type=Path, help="reconstruction folder (holds gaussians.ply and cameras.json)")
+    render.add_argument("-o", "--output", type=Path, help="folder to write (default: RECONSTRUCTION/renders)")
+    render.add_argument("--count", type=int, default=12, help="views on the arc (default 12)")
+    render.add_argument("--angles", type=_angles, help="render at these angles instead, written with = when the first "
+                                                       "is negative: --angles=-22.5,22.5")
+    render.add_argument("--scale", type=float, default=1.0, help="image size relative to the input views (default 1)")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    render.set_defaults(run=_run_render)
     return parser
 
 
@@ -150,13 +183,19 @@ def _run_fuse(args: argparse.Namespace) -> int:
             raise InputError(f"{name} must be a positive number, got {value}")
     if args.output.exists() and not args.overwrite and (not args.output.is_dir() or any(args.output.iterdir())):
         raise InputError(f"{args.output}: already exists and is not empty (use --overwrite to replace it)")
+    if args.backend == "dust3r" and args.checkpoint is None:
+        raise InputError("--backend dust3r needs --checkpoint PATH (a DUSt3R .pth file; nothing is downloaded)")
+    if args.backend != "dust3r" and args.checkpoint is not None:
+        raise InputError(f"--checkpoint is only used by --backend dust3r (the {args.backend} backend has no weights)")
     captures = load_any(args.inputs)
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
-    config = FuseConfig(backend=args.backend, matcher=args.matcher, icp=args.icp, px_per_mm=args.px_per_mm,
+    config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
+                        device=args.device, pair_batch=args.pair_batch, matcher=args.matcher, icp=args.icp, px_per_mm=args.px_per_mm,
                         finger_width_mm=args.finger_width_mm, mesh=args.mesh, seed=args.seed)
     if args.iterations is not None:
         config = replace(config, global_align=replace(config.global_align, iterations=args.iterations))
+    config = replace(config, splat=_splat_config(args))
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True)
     write_reconstruction(result, args.output, overwrite=args.overwrite)
@@ -165,6 +204,18 @@ def _run_fuse(args: argparse.Namespace) -> int:
           f"alignment residual {alignment['residual_px']:.2f} px{'' if alignment['ok'] else ' (ALIGNMENT FAILED)'}, "
           f"{time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _splat_config(args: argparse.Namespace):
+    """The splat settings from ``--splat-*`` (None with ``--no-splat``)."""
+    if args.no_splat:
+        return None
+    if args.splat_iterations is not None and args.splat_iterations < 0:
+        raise InputError(f"--splat-iterations must be >= 0, got {args.splat_iterations}")
+    if args.splat_density is not None and not args.splat_density > 0:
+        raise InputError(f"--splat-budget-density must be positive, got {args.splat_density}")
+    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_density,
+                  refine_poses=False if args.no_pose_refinement else None)
 
 
 def _describe(capture) -> dict:
@@ -219,6 +270,42 @@ def _run_preview(args: argparse.Namespace) -> int:
     output = args.output or args.capture / "preview.png"
     write_image(output, sheet.astype("float32") / 255.0)
     print(f"wrote {output}")
+    return 0
+
+
+def _run_render(args: argparse.Namespace) -> int:
+    from .io.cameras import read_cameras
+    from .io.gaussians_ply import read_gaussians_ply
+    from .io.renders import write_renders
+    from .splat.camera_path import arc_cameras, cameras_at_angles
+    from .splat.fit import default_device
+    from .splat.novel import render_views
+
+    folder = args.reconstruction
+    for needed in ("gaussians.ply", "cameras.json"):
+        if not (folder / needed).is_file():
+            hint = " (fuse it without --no-splat)" if needed == "gaussians.ply" else ""
+            raise InputError(f"{folder / needed}: missing; 'fs3d render' needs a reconstruction folder from 'fs3d fuse'{hint}")
+    if args.count < 1 or args.count > 1000:
+        raise InputError(f"--count must be between 1 and 1000, got {args.count}")
+    if not 0.01 <= args.scale <= 8:
+        raise InputError(f"--scale must be between 0.01 and 8, got {args.scale}")
+    output = args.output or folder / "renders"
+    if output.exists() and not args.overwrite and (not output.is_dir() or any(output.iterdir())):
+        raise InputError(f"{output}: already exists and is not empty (use --overwrite to replace it)")
+    cameras = read_cameras(folder / "cameras.json")
+    gaussians = read_gaussians_ply(folder / "gaussians.ply").to(default_device())
+    inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]
+    start = time.perf_counter()
+    if args.angles:
+        novel = cameras_at_angles(inputs, args.angles)
+        names = [f"angle_{a:+07.2f}".replace(".", "p") for a in args.angles]
+    else:
+        novel = arc_cameras(inputs, args.count)
+        names = [f"arc_{k:02d}" for k in range(len(novel))]
+    views = render_views(gaussians, list(zip(names, novel)))
+    write_renders(output, views, cameras.units, cameras.scale_mm_per_unit, overwrite=args.overwrite)
+    print(f"wrote {output}: {len(views)} views of {len(gaussians)} Gaussians in {time.perf_counter() - start:.1f} s")
     return 0
 
 

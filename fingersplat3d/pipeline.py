@@ -22,6 +22,7 @@ from .align.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespond
 from .align.icp import ICPConfig, refine_poses
 from .errors import InputError
 from .scene import Camera, Capture, View
+from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS"]
 
@@ -33,7 +34,13 @@ class FuseConfig:
     """Settings of ``fs3d fuse`` (geometry)."""
 
     backend: str = "prior"
-    """Pointmap backend name (``prior`` needs no weights)."""
+    """Pointmap backend name (``prior`` needs no weights; ``dust3r`` needs ``checkpoint``)."""
+    checkpoint: str | None = None
+    """Weights of a learned backend (``dust3r``: a DUSt3R .pth checkpoint); never downloaded."""
+    device: str = "auto"
+    """Where a learned backend runs: ``auto`` (CUDA when available, else CPU), ``cpu``, ``cuda``, ``cuda:N``."""
+    pair_batch: int = 4
+    """Image pairs a learned backend decodes at once."""
     matcher: str = "minutiae"
     """Correspondence method between views (see :mod:`fingersplat3d.align.features`)."""
     dense_matches: bool = True
@@ -56,8 +63,18 @@ class FuseConfig:
     """Metric hint: the finger's width in mm (used when px_per_mm is not given)."""
     mesh: bool = False
     """Also build a triangle mesh (Poisson, cleaned with pymeshlab)."""
+    splat: SplatConfig | None = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
+    """Fit Gaussians to the photos on top of the fused cloud (None = geometry only, ``--no-splat``)."""
+    clean: "CleanConfig" = field(default_factory=lambda: _default_clean())
+    """Multi-view mask voting and boundary decomposition of the fitted Gaussians."""
     seed: int = 0
     """Seed of the random parts (RANSAC)."""
+
+
+def _default_clean():
+    from .segment.voting import CleanConfig
+
+    return CleanConfig()
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,6 +90,8 @@ class Reconstruction:
     scale_mm_per_unit: float | None
     report: dict
     mesh: object | None = None
+    gaussians: object | None = None  # fingersplat3d.splat.Gaussians (cleaned), when the splat stage ran
+    splat_depths: list[np.ndarray] | None = None  # [H, W] expected depth of the Gaussians per view
 
 
 class _Stages:
@@ -106,29 +125,60 @@ def _with_masks(capture: Capture) -> Capture:
     return Capture(tuple(views), capture.metadata)
 
 
-def _pairs(capture: Capture, pointmaps, config: FuseConfig, report: dict) -> list[PairCorrespondences]:
+def _backend(config: FuseConfig):
+    """The pointmap backend, given only the options it takes (weights options go to learned backends)."""
+    from .pointmaps import get_backend
+
+    if config.backend == "dust3r":
+        return get_backend("dust3r", checkpoint=config.checkpoint, device=config.device, batch_size=config.pair_batch)
+    if config.checkpoint is not None:
+        raise InputError(f"a checkpoint is only used by the dust3r backend, not by {config.backend!r}")
+    return get_backend(config.backend)
+
+
+def _view_pairs(capture: Capture) -> list[tuple[int, int]]:
+    return [(a, b) for a in range(len(capture)) for b in range(a + 1, len(capture))]
+
+
+def _identical(view_a: View, view_b: View) -> bool:
+    return view_a.image.shape == view_b.image.shape and np.array_equal(view_a.image, view_b.image)
+
+
+def _pairs(capture: Capture, pointmaps, config: FuseConfig, report: dict,
+           pair_pointmaps: dict | None = None) -> list[PairCorrespondences]:
+    """Pair relations: from the backend's pairwise pointmaps when it gives them, else image matching."""
     from .align.features import match_views
     from .align.pairwise import register_pair
+    from .align.pointmap_pairs import register_pointmap_pair
 
     rng = np.random.default_rng(config.seed)
     pairs, records = [], []
     views = capture.views
-    for a in range(len(views)):
-        for b in range(a + 1, len(views)):
-            record = {"a": views[a].name, "b": views[b].name}
-            if views[a].image.shape == views[b].image.shape and np.array_equal(views[a].image, views[b].image):
-                record.update(ok=False, reason="identical images: no parallax (monocular mode)")
-                records.append(record)
-                continue
-            matches = match_views(views[a].image, views[a].mask, views[b].image, views[b].mask, method=config.matcher,
-                                  densify=config.dense_matches and config.matcher == "minutiae")
-            registration = register_pair(pointmaps[a], pointmaps[b], matches, rng=rng)
-            record.update(matches=int(len(matches.uv_a)), inliers=int(registration.n_inliers),
-                          residual=float(registration.residual), ok=bool(registration.ok), reason=registration.reason)
+    for a, b in _view_pairs(capture):
+        record = {"a": views[a].name, "b": views[b].name}
+        if _identical(views[a], views[b]):
+            record.update(ok=False, reason="identical images: no parallax (monocular mode)")
+            records.append(record)
+            continue
+        if pair_pointmaps is not None:
+            registration = register_pointmap_pair(pointmaps[a], pointmaps[b], pair_pointmaps[(a, b)],
+                                                  pair_pointmaps.get((b, a)), mask_a=views[a].mask,
+                                                  mask_b=views[b].mask, rng=rng)
+            record.update(method="pointmaps", correspondences=registration.n_correspondences,
+                          residual=float(registration.residual), ok=registration.ok, reason=registration.reason)
             records.append(record)
             if registration.ok:
-                pairs.append(PairCorrespondences(a, b, registration.uv_a, registration.uv_b, registration.weight,
-                                                 registration.b_to_a.as_matrix()))
+                pairs.append(registration.correspondences)
+            continue
+        matches = match_views(views[a].image, views[a].mask, views[b].image, views[b].mask, method=config.matcher,
+                              densify=config.dense_matches and config.matcher == "minutiae")
+        registration = register_pair(pointmaps[a], pointmaps[b], matches, rng=rng)
+        record.update(matches=int(len(matches.uv_a)), inliers=int(registration.n_inliers),
+                      residual=float(registration.residual), ok=bool(registration.ok), reason=registration.reason)
+        records.append(record)
+        if registration.ok:
+            pairs.append(PairCorrespondences(a, b, registration.uv_a, registration.uv_b, registration.weight,
+                                             registration.b_to_a.as_matrix()))
     report["pairs"] = records
     return pairs
 
@@ -158,20 +208,20 @@ def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.nda
     return None
 
 
-def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = False) -> Reconstruction:
-    """Recover cameras and one fused finger surface from the capture's images (cameras ignored)."""
+def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = False) -> Reconstruction:
+    """Recover cameras and one fused finger surface from the capture's images (cameras ignored), and
+    fit Gaussians to the photos on top (``config.splat``)."""
+    config = FuseConfig() if config is None else config
     from tqdm import tqdm
 
     import open3d as o3d
-
-    from .pointmaps import get_backend
 
     if len(capture) < MIN_VIEWS:
         raise InputError("fs3d fuse needs at least one image")
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}
-    bar = tqdm(total=6, desc="fs3d fuse", unit="stage", disable=not progress)
+    bar = tqdm(total=6 + (config.splat is not None), desc="fs3d fuse", unit="stage", disable=not progress)
 
     def step(name):
         bar.set_postfix_str(name)
@@ -181,11 +231,17 @@ def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = F
         capture = _with_masks(capture)
     bar.update()
     with step("pointmaps"):
-        backend = get_backend(config.backend)
+        backend = _backend(config)
         pointmaps = backend.predict_views(capture.views)
+        pair_pointmaps = None
+        if hasattr(backend, "predict_pairs"):  # learned pairwise pointmaps replace image matching
+            distinct = [(a, b) for a, b in _view_pairs(capture) if not _identical(capture.views[a], capture.views[b])]
+            pair_pointmaps = {(p.i, p.j): p for p in backend.predict_pairs(capture.views, distinct)} if distinct else {}
+        if getattr(backend, "stats", None):
+            report["pointmap_inference"] = [asdict(record) for record in backend.stats]
     bar.update()
     with step("pairwise"):
-        pairs = _pairs(capture, pointmaps, config, report)
+        pairs = _pairs(capture, pointmaps, config, report, pair_pointmaps)
     bar.update()
     with step("global_alignment"):
         alignment = global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], pairs,
@@ -232,6 +288,16 @@ def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = F
             depths = [d * scale for d in depths]
             cameras = [_scaled_camera(c, scale) for c in cameras]
     bar.update()
+    splat = None
+    if config.splat is not None:
+        from .splat.stage import run_splat_stage
+
+        with step("splat"):
+            splat = run_splat_stage(capture.views, cameras, aligned_views or [0], cloud, config.splat, config.clean,
+                                    progress=progress)
+        cameras = splat.cameras
+        report["splat"] = splat.report
+        bar.update()
     mesh = None
     if config.mesh:
         from .mesh import mesh_from_cloud
@@ -245,7 +311,8 @@ def fuse(capture: Capture, config: FuseConfig = FuseConfig(), progress: bool = F
                              "spanning_tree": [[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
                              "aligned": dict(zip(capture.names, alignment.aligned)), **report.get("alignment", {})},
                   points=len(cloud.points))
-    return Reconstruction(capture, cameras, depths, confidences, cloud, units, scale, report, mesh)
+    return Reconstruction(capture, cameras, depths, confidences, cloud, units, scale, report, mesh,
+                          splat.gaussians if splat else None, splat.depths if splat else None)
 
 
 def _check_alignment(capture: Capture, alignment: GlobalAlignment, pairs, report: dict) -> None:
@@ -301,6 +368,10 @@ def write_reconstruction(result: Reconstruction, folder: str | Path, overwrite: 
         write_cameras(temporary / "cameras.json", entries, units=result.units, scale_mm_per_unit=result.scale_mm_per_unit)
         for view, depth in zip(result.capture.views, result.depths):
             write_view_depth(temporary, view.name, depth, units="mm" if result.units == "mm" else "arbitrary")
+        if result.gaussians is not None:
+            from .io.gaussians_ply import write_gaussians_ply
+
+            write_gaussians_ply(temporary / "gaussians.ply", result.gaussians)
         if result.mesh is not None:
             from .mesh import write_mesh
 

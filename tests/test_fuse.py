@@ -14,6 +14,7 @@ from fingersplat3d.scene import Capture, View
 from fingersplat3d.synth import SynthConfig, synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
+GEOMETRY = FuseConfig(splat=None)  # these tests are about the geometry; the splat stage has its own
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +24,7 @@ def uwa():
 
 @pytest.fixture(scope="module")
 def reconstruction(uwa):
-    return fuse(uwa)
+    return fuse(uwa, GEOMETRY)
 
 
 def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):
@@ -66,7 +67,7 @@ def test_reconstruction_folder_contract(reconstruction, tmp_path):
 
 def test_metric_hints_make_millimetres(uwa):
     truth_px_per_mm = uwa.views[0].camera.K[0, 0] / np.nanmedian(uwa.views[0].depth)
-    for config in (FuseConfig(px_per_mm=truth_px_per_mm), FuseConfig(finger_width_mm=16.0)):
+    for config in (FuseConfig(px_per_mm=truth_px_per_mm, splat=None), FuseConfig(finger_width_mm=16.0, splat=None)):
         result = fuse(uwa, config)
         assert result.units == "mm" and result.scale_mm_per_unit > 0
         extent = np.ptp(np.asarray(result.cloud.points), axis=0)
@@ -75,7 +76,7 @@ def test_metric_hints_make_millimetres(uwa):
 
 def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     out = tmp_path / "rec"
-    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(out), "--mesh"]) == 0
+    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(out), "--mesh", "--no-splat"]) == 0
     assert "wrote" in capsys.readouterr().out
     import pymeshlab
 
@@ -84,7 +85,7 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     assert meshset.current_mesh().face_number() > 1000
     # The same images given as a list of files.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
-    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp"]) == 0
+    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat"]) == 0
 
 
 def test_cli_fuse_refuses_bad_input(tmp_path, capsys):
@@ -108,7 +109,7 @@ def _finite_result(result):
 def test_identical_views_are_monocular_mode(uwa):
     view = uwa["center"]
     twins = Capture((View("a", view.image), View("b", view.image)))
-    result = fuse(twins)
+    result = fuse(twins, GEOMETRY)
     _finite_result(result)
     assert result.report["alignment"]["mode"] == "monocular"
     assert result.report["pairs"][0]["reason"].startswith("identical images")
@@ -116,7 +117,7 @@ def test_identical_views_are_monocular_mode(uwa):
 
 
 def test_views_90_degrees_apart_fail_loudly_but_finitely(uwa, capsys):
-    result = fuse(Capture((uwa["left"].with_(camera=None, depth=None), uwa["right"].with_(camera=None, depth=None))))
+    result = fuse(Capture((uwa["left"].with_(camera=None, depth=None), uwa["right"].with_(camera=None, depth=None))), GEOMETRY)
     _finite_result(result)
     assert "warning" in capsys.readouterr().err
     assert not result.report["alignment"]["ok"] or result.report["alignment"].get("mode") == "monocular"
@@ -124,9 +125,9 @@ def test_views_90_degrees_apart_fail_loudly_but_finitely(uwa, capsys):
 
 def test_single_image_and_tiny_images():
     tiny = synthesize(2, SynthConfig(size=(48, 40)))
-    result = fuse(Capture(tiny.capture.views[:1]))
+    result = fuse(Capture(tiny.capture.views[:1]), GEOMETRY)
     _finite_result(result)
-    result = fuse(tiny.capture)  # too small to match ridges: monocular fallback, still finite
+    result = fuse(tiny.capture, GEOMETRY)  # too small to match ridges: monocular fallback, still finite
     _finite_result(result)
 
 
@@ -135,7 +136,7 @@ def test_few_pixel_mask_is_a_clear_error(uwa):
     mask = np.zeros_like(view.mask)
     mask[100:103, 100:103] = True
     with pytest.raises(InputError, match="center"):
-        fuse(Capture((view.with_(mask=mask), uwa["left"])))
+        fuse(Capture((view.with_(mask=mask), uwa["left"])), GEOMETRY)
 
 
 def test_extreme_focal_guesses_stay_finite(uwa):

@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         blind = Capture(tuple(v.with_(camera=None, depth=None) for v in truth.views), truth.metadata)
         register_backend("exact", lambda: ExactBackend(truth))
         for backend in ("prior", "exact"):
-            result = fuse(blind, FuseConfig(backend=backend))
+            result = fuse(blind, FuseConfig(backend=backend, splat=None))
             rotation = relative_rotation_errors([c.world_to_cam for c in result.cameras],
                                                 [v.camera.world_to_cam for v in truth.views])
             depth = [depth_errors(d, v.depth, v.mask).mae for d, v in zip(result.depths, truth.views)]

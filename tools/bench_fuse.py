@@ -144,7 +144,7 @@ def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
     rss_after_import = peak_rss_mib()
 
     setting = SETTINGS[key]
-    config = FuseConfig(**setting["fuse"])
+    config = FuseConfig(**{"splat": None, **setting["fuse"]})  # geometry only; tools/bench_splat.py measures the fit
     captures = {}
     for seed in seeds:
         with open(folder / f"{setting['synth']}-{seed}.pkl", "rb") as handle:

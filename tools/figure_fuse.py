@@ -16,7 +16,7 @@ import numpy as np
 
 from fingersplat3d.eval import align_scale_shift, depth_errors
 from fingersplat3d.io import depth_colormap, read_capture, write_image
-from fingersplat3d.pipeline import fuse
+from fingersplat3d.pipeline import FuseConfig, fuse
 
 
 def _label(tile: np.ndarray, text: str) -> np.ndarray:
@@ -32,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tile-width", type=int, default=300)
     args = parser.parse_args(argv)
     capture = read_capture(args.capture)
-    result = fuse(capture.__class__(tuple(v.with_(camera=None, depth=None) for v in capture.views), capture.metadata))
+    blind = capture.__class__(tuple(v.with_(camera=None, depth=None) for v in capture.views), capture.metadata)
+    result = fuse(blind, FuseConfig(splat=None))
     rows = []
     for view, depth in zip(capture.views, result.depths):
         scale, shift = align_scale_shift(depth, view.depth, view.mask)

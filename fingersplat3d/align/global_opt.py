@@ -147,7 +147,7 @@ def axis_angle_to_matrix(omega: torch.Tensor) -> torch.Tensor:
     zero = torch.zeros_like(x)
     cross = torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
                          torch.stack([-y, x, zero], -1)], -2)
-    eye = torch.eye(3, dtype=omega.dtype).expand(cross.shape)
+    eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
     return eye + a * cross + b * (cross @ cross)
 
 

@@ -1,0 +1,109 @@
+"""Settings of the Gaussian-splat fit, and the ``fast`` / ``balanced`` / ``accurate`` presets.
+
+Every knob is a dataclass field with a docstring; presets are instances, overridden with
+:func:`dataclasses.replace` (``fs3d fuse --splat-preset fast --splat-iterations 500``). The figures
+that chose the preset values are in the README (``tools/bench_splat.py``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+__all__ = ["SplatConfig", "PRESETS", "preset", "DEFAULT_PRESET"]
+
+
+@dataclass(frozen=True)
+class SplatConfig:
+    """Fitting of Gaussians to the input photos (SH degree 0, 0.8 L1 + 0.2 D-SSIM inside the finger)."""
+
+    iterations: int = 600
+    """Optimisation steps; each step renders one input view (views are visited in shuffled rounds)."""
+    lambda_dssim: float = 0.2
+    """Weight of ``1 - SSIM`` in the loss (the paper's 0.2; L1 gets ``1 - lambda_dssim``)."""
+    # --- model size -------------------------------------------------------------------------
+    gaussians_per_cell: float = 1.0
+    """Gaussian budget density: Gaussians per (quarter ridge period)^2 of finger area, summed over
+    views and divided by ``view_overlap``. The budget caps the initial cloud and densification."""
+    view_overlap: float = 1.5
+    """How many views see an average skin point (turns summed per-view areas into surface area)."""
+    min_gaussians: int = 2000
+    """Floor of the budget (tiny images still get a model)."""
+    max_gaussians: int = 400_000
+    """Ceiling of the budget (memory)."""
+    init_opacity: float = 0.5
+    """Opacity of the initial Gaussians."""
+    init_scale_factor: float = 0.7
+    """Initial scale = this x mean distance to the 3 nearest neighbours."""
+    flatten: float | None = 0.3
+    """Initialise each Gaussian as a disc in the surface's tangent plane, this thick relative to its
+    width (the scene is a skin surface); None = isotropic."""
+    # --- learning rates (Adam, per parameter group) --------------------------------------------
+    lr_means: float = 1.6e-4
+    """Initial learning rate of the centres, times the scene extent (decays exponentially)."""
+    lr_means_final: float = 1.6e-6
+    """Final learning rate of the centres, times the scene extent."""
+    lr_scales: float = 0.005
+    """Learning rate of the log scales."""
+    lr_quats: float = 0.001
+    """Learning rate of the quaternions."""
+    lr_opacity: float = 0.05
+    """Learning rate of the opacity logits."""
+    lr_colors: float = 0.0025
+    """Learning rate of the SH DC coefficients."""
+    # --- densification and pruning (3DGS's adaptive density control) ----------------------------
+    densify_from: int = 100
+    """First step that may densify."""
+    densify_until_fraction: float = 0.6
+    """Densification stops after this fraction of the iterations."""
+    densify_every: int = 100
+    """Steps between densify/prune passes."""
+    grad_threshold: float = 0.0002
+    """Mean view-space positional gradient (NDC units, as 3DGS) above which a Gaussian is densified."""
+    percent_dense: float = 0.01
+    """Gaussians larger than this fraction of the scene extent are split, smaller ones cloned."""
+    prune_opacity: float = 0.005
+    """Gaussians less opaque than this are removed."""
+    prune_scale: float = 0.1
+    """Gaussians larger than this fraction of the scene extent are removed."""
+    # --- cameras -------------------------------------------------------------------------------
+    refine_poses: bool = True
+    """Jointly refine the camera poses (InstantSplat-style; the first view stays fixed)."""
+    lr_pose_rotation: float = 1e-3
+    """Learning rate of the pose corrections' axis-angle (radians)."""
+    lr_pose_translation: float = 1e-3
+    """Learning rate of the pose corrections' translation, times the scene extent."""
+    # --- rendering -----------------------------------------------------------------------------
+    near_fraction: float = 0.01
+    """Near plane as a fraction of the camera-to-finger distance."""
+    seed: int = 0
+    """Seed of the view order and of densification."""
+
+    def __post_init__(self) -> None:
+        if self.iterations < 0:
+            raise ValueError("SplatConfig.iterations must be >= 0")
+        if not 0.0 <= self.lambda_dssim <= 1.0:
+            raise ValueError("SplatConfig.lambda_dssim must be in [0, 1]")
+        if self.gaussians_per_cell <= 0 or self.min_gaussians < 1 or self.max_gaussians < self.min_gaussians:
+            raise ValueError("SplatConfig: the Gaussian budget settings must be positive and min <= max")
+
+    @property
+    def densify_until(self) -> int:
+        return int(self.iterations * self.densify_until_fraction)
+
+
+PRESETS: dict[str, SplatConfig] = {
+    "fast": SplatConfig(iterations=300, gaussians_per_cell=0.6, densify_every=100),
+    "balanced": SplatConfig(iterations=900),
+    "accurate": SplatConfig(iterations=2500, gaussians_per_cell=1.5, densify_every=150, densify_from=300),
+}
+DEFAULT_PRESET = "balanced"
+
+
+def preset(name: str, **overrides) -> SplatConfig:
+    """The named preset with any fields overridden; unknown names or fields are a clear error."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown splat preset {name!r}; available: {', '.join(PRESETS)}")
+    known = {f.name for f in fields(SplatConfig)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise ValueError(f"unknown splat setting(s) {', '.join(unknown)}")
+    return replace(PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})

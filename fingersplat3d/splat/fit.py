@@ -1,0 +1,224 @@
+"""Fit Gaussians to the input photos: the paper's section C (3DGS with SH degree 0).
+
+``fit_gaussians(initial, views, cameras, config)`` optimises the Gaussians (and, optionally, the
+camera poses, InstantSplat-style) with Adam, per-group learning rates, one view per step, the loss
+``(1 - l) L1 + l (1 - SSIM)`` inside the finger mask, and adaptive density control under a budget
+that follows the finger's area and ridge frequency (:func:`gaussian_budget`). No background
+Gaussians, no view-dependent colour. ``fit_camera`` aligns one camera to a photo with the model
+frozen (used to evaluate held-out views, as pose-free 3DGS methods do).
+
+Runs on the device of ``device`` (default: CUDA when present, else CPU). No Open3D, no files.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from ..scene import Camera, View
+from .config import SplatConfig
+from .gaussians import Gaussians
+from .losses import photometric_loss
+from .pose import apply_pose_correction
+from .rasterize import RenderOutput, rasterize
+from .strategy import DensifyStats, GradientStats, densify_and_prune, gaussians_of
+
+__all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget",
+           "default_device", "scene_extent", "near_plane"]
+
+
+def default_device() -> torch.device:
+    """CUDA when present, else CPU."""
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+@dataclass(frozen=True, eq=False)
+class FitTarget:
+    """One training view on the fitting device."""
+
+    image: torch.Tensor  # [H, W, C] float in [0, 1]
+    mask: torch.Tensor  # [H, W] bool, the finger
+    K: torch.Tensor  # [3, 3]
+    world_to_cam: torch.Tensor  # [4, 4]
+    width: int
+    height: int
+
+    @classmethod
+    def from_view(cls, view: View, camera: Camera, device: torch.device) -> "FitTarget":
+        image = view.image if view.image.ndim == 3 else view.image[..., None]
+        mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
+        as_tensor = lambda a, dtype=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)  # noqa: E731
+        return cls(as_tensor(image), as_tensor(mask, torch.bool), as_tensor(camera.K), as_tensor(camera.world_to_cam),
+                   view.width, view.height)
+
+
+@dataclass(frozen=True, eq=False)
+class SplatFit:
+    """The fitted model, the (refined) cameras and what happened."""
+
+    gaussians: Gaussians  # detached, on the fitting device
+    cameras: list[Camera]  # input cameras with refined poses (unchanged when refine_poses is off)
+    losses: list[float]  # loss per step
+    densify: list[DensifyStats]
+    initial_count: int
+    budget: int
+    seconds: float
+
+
+def gaussian_budget(views: Sequence[View], config: SplatConfig) -> int:
+    """Gaussians the finger needs: ``gaussians_per_cell`` per (ridge period / 4)^2 of finger area.
+
+    Resolving a ridge (a bright and a dark band per period) takes about two Gaussians across each
+    band, i.e. a spacing of a quarter period; the areas of the views' masks are summed and divided
+    by ``view_overlap`` (how many views see an average skin point).
+    """
+    from ..align.features import estimate_ridge_period
+
+    cells = 0.0
+    for view in views:
+        mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
+        gray = view.image if view.image.ndim == 2 else view.image.mean(axis=2)
+        period = estimate_ridge_period(gray, mask)
+        cells += float(mask.sum()) / (period / 4.0) ** 2
+    budget = config.gaussians_per_cell * cells / max(config.view_overlap, 1.0)
+    return int(np.clip(budget, config.min_gaussians, config.max_gaussians))
+
+
+def scene_extent(means: torch.Tensor) -> float:
+    """Size of the model: the diagonal of the 1-99 percentile box of the centres."""
+    if len(means) == 0:
+        return 1.0
+    sample = means.detach()[:: max(1, len(means) // 50_000)].float()
+    low, high = torch.quantile(sample, 0.01, dim=0), torch.quantile(sample, 0.99, dim=0)
+    extent = float(torch.linalg.vector_norm(high - low))
+    return extent if math.isfinite(extent) and extent > 0 else 1.0
+
+
+def near_plane(means: torch.Tensor, camera: Camera, fraction: float) -> float:
+    """``fraction`` of the distance from the camera to the model's median centre."""
+    if len(means) == 0:
+        return fraction
+    centre = means.detach().median(dim=0).values.cpu().double().numpy()
+    distance = float(np.linalg.norm(camera.world_to_camera(centre[None])[0]))
+    return fraction * distance if math.isfinite(distance) and distance > 0 else fraction
+
+
+def render_camera(gaussians: Gaussians, camera: Camera, near: float, world_to_cam: torch.Tensor | None = None,
+                  background: torch.Tensor | None = None) -> RenderOutput:
+    """Render the model from a :class:`Camera` (optionally with an explicit, differentiable pose)."""
+    device, dtype = gaussians.means.device, gaussians.means.dtype
+    K = torch.as_tensor(camera.K, dtype=dtype, device=device)
+    if world_to_cam is None:
+        world_to_cam = torch.as_tensor(camera.world_to_cam, dtype=dtype, device=device)
+    colors = (0.5 + 0.28209479177387814 * gaussians.sh_dc).clamp_min(0.0)
+    return rasterize(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, colors,
+                     world_to_cam, K, camera.width, camera.height, near=near, background=background)
+
+
+def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: int, device) -> tuple:
+    parameters = [torch.nn.Parameter(t.detach().clone().contiguous()) for t in model.tensors()]
+    rates = [config.lr_means * extent, config.lr_quats, config.lr_scales, config.lr_opacity, config.lr_colors]
+    rotation = torch.nn.Parameter(torch.zeros(n_views, 3, device=device))
+    translation = torch.nn.Parameter(torch.zeros(n_views, 3, device=device))
+    groups = [{"params": [p], "lr": lr, "name": name}
+              for p, lr, name in zip(parameters, rates, ("means", "quats", "log_scales", "opacity", "sh_dc"))]
+    groups += [{"params": [rotation], "lr": config.lr_pose_rotation if config.refine_poses else 0.0, "name": "pose_rotation"},
+               {"params": [translation], "lr": config.lr_pose_translation * extent if config.refine_poses else 0.0,
+                "name": "pose_translation"}]
+    return torch.optim.Adam(groups, eps=1e-15), rotation, translation
+
+
+def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[Camera],
+                  config: SplatConfig = SplatConfig(), *, budget: int | None = None, device: torch.device | None = None,
+                  progress: bool = False) -> SplatFit:
+    """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger."""
+    from tqdm import tqdm
+
+    if len(views) != len(cameras) or not views:
+        raise ValueError("fit_gaussians needs one camera per view and at least one view")
+    device = default_device() if device is None else torch.device(device)
+    started = time.perf_counter()
+    model = initial.detach().to(device, torch.float32)
+    targets = [FitTarget.from_view(view, camera, device) for view, camera in zip(views, cameras)]
+    if model.channels != targets[0].image.shape[-1]:
+        raise ValueError(f"the model has {model.channels} colour channel(s) but the images have {targets[0].image.shape[-1]}")
+    budget = gaussian_budget(views, config) if budget is None else int(budget)
+    extent = scene_extent(model.means)
+    nears = [near_plane(model.means, camera, config.near_fraction) for camera in cameras]
+    optimizer, rotation, translation = _optimizer(model, config, extent, len(views), device)
+    generator = torch.Generator(device=device).manual_seed(config.seed)
+    order_rng = np.random.default_rng(config.seed)
+    stats = GradientStats.zeros(len(model), device)
+    losses: list[float] = []
+    densify_records: list[DensifyStats] = []
+    decays = config.lr_means > 0 and config.lr_means_final > 0
+    means_decay = (config.lr_means_final / config.lr_means) ** (1.0 / max(config.iterations, 1)) if decays else 1.0
+    order: list[int] = []
+    bar = tqdm(range(config.iterations), desc="fs3d splat", unit="step", disable=not progress)
+    for step in bar:
+        if not order:
+            order = list(order_rng.permutation(len(views)))
+        v = order.pop()
+        target = targets[v]
+        current = gaussians_of(optimizer)
+        pose = target.world_to_cam
+        if config.refine_poses and v != 0:
+            pose = apply_pose_correction(pose, rotation[v], translation[v])
+        colors = (0.5 + 0.28209479177387814 * current.sh_dc).clamp_min(0.0)
+        out = rasterize(current.means, current.quats, torch.exp(current.log_scales), torch.sigmoid(current.opacity_logits),
+                        colors, pose, target.K, target.width, target.height, near=nears[v])
+        out.means2d.retain_grad()
+        loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        losses.append(float(loss.detach()))
+        if out.means2d.grad is not None:
+            stats.add(out.means2d.grad, out.radii, target.width, target.height)
+        optimizer.param_groups[0]["lr"] *= means_decay
+        if (step + 1) % config.densify_every == 0 and config.densify_from <= step + 1 <= max(config.densify_until, config.densify_from):
+            densify_records.append(densify_and_prune(optimizer, stats, config, extent, budget, generator))
+        if step % 10 == 0:
+            bar.set_postfix(loss=f"{losses[-1]:.4f}", gaussians=len(current))
+    bar.close()
+    fitted = gaussians_of(optimizer).detach()
+    refined = list(cameras)
+    if config.refine_poses:
+        with torch.no_grad():
+            for v in range(1, len(cameras)):
+                pose = apply_pose_correction(targets[v].world_to_cam.double(), rotation[v].double(), translation[v].double())
+                refined[v] = Camera(cameras[v].K, pose.cpu().numpy(), cameras[v].width, cameras[v].height)
+    return SplatFit(fitted, refined, losses, densify_records, len(initial), budget, time.perf_counter() - started)
+
+
+def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np.ndarray, *, iterations: int = 150,
+               lr_rotation: float = 2e-3, lr_translation: float = 2e-3, lambda_dssim: float = 0.2,
+               near_fraction: float = 0.01) -> Camera:
+    """Refine one camera's pose so the frozen model's render matches ``image`` inside ``mask``.
+
+    Coarse-to-fine is unnecessary for the small corrections this is meant for (a held-out camera
+    placed from the rig, off by a few degrees); translations are relative to the scene extent.
+    """
+    device = gaussians.means.device
+    model = gaussians.detach()
+    target = FitTarget.from_view(View("target", image, mask), camera, device)
+    extent = scene_extent(model.means)
+    near = near_plane(model.means, camera, near_fraction)
+    rotation = torch.zeros(3, device=device, requires_grad=True)
+    translation = torch.zeros(3, device=device, requires_grad=True)
+    optimizer = torch.optim.Adam([{"params": [rotation], "lr": lr_rotation},
+                                  {"params": [translation], "lr": lr_translation * extent}])
+    for _ in range(iterations):
+        pose = apply_pose_correction(target.world_to_cam, rotation, translation)
+        out = render_camera(model, camera, near, world_to_cam=pose)
+        loss = photometric_loss(out.color, target.image, target.mask, lambda_dssim)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+    with torch.no_grad():
+        pose = apply_pose_correction(target.world_to_cam.double(), rotation.double(), translation.double())
+    return Camera(camera.K, pose.cpu().numpy(), camera.width, camera.height)

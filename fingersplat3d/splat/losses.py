@@ -1,0 +1,121 @@
+"""Photometric losses for fitting Gaussians: masked L1, SSIM (as in 3DGS) and their mix.
+
+Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors in [0, 1]. A mask is
+``[H, W]`` (bool, or float weights in [0, 1]); every masked mean is ``sum(w * x) / max(sum(w), 1)``
+so an empty mask gives a finite 0 with a finite (zero) gradient instead of 0 / 0.
+
+SSIM follows the 3DGS training code: an 11x11 Gaussian window (sigma 1.5) applied per channel
+(``conv2d`` with ``groups = C``) with zero padding, ``C1 = 0.01^2``, ``C2 = 0.03^2``; the SSIM
+map is computed on the whole image and averaged over the mask.
+
+Pure math: no Open3D, no files.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["gaussian_window", "ssim_map", "ssim", "masked_l1", "photometric_loss",
+           "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
+
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_C1 = 0.01 ** 2
+SSIM_C2 = 0.03 ** 2
+
+
+def gaussian_window(size: int = SSIM_WINDOW, sigma: float = SSIM_SIGMA, *, dtype: torch.dtype = torch.float32,
+                    device: torch.device | str | None = None) -> torch.Tensor:
+    """The normalised separable Gaussian window ``[size, size]`` (sums to 1)."""
+    x = torch.arange(size, dtype=torch.float64) - (size - 1) / 2.0
+    g = torch.exp(-(x * x) / (2.0 * sigma * sigma))
+    g = g / g.sum()
+    return torch.outer(g, g).to(dtype=dtype, device=device)
+
+
+def _as_hwc(image: torch.Tensor, name: str) -> torch.Tensor:
+    if image.ndim == 2:
+        return image[..., None]
+    if image.ndim != 3:
+        raise ValueError(f"{name} must be [H, W] or [H, W, C], got shape {tuple(image.shape)}")
+    return image
+
+
+def _check_pair(render: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    render, target = _as_hwc(render, "render"), _as_hwc(target, "target")
+    if render.shape != target.shape:
+        raise ValueError(f"render {tuple(render.shape)} and target {tuple(target.shape)} differ in shape")
+    return render, target.to(dtype=render.dtype, device=render.device)
+
+
+def _mask_weights(mask: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor | None:
+    """``[H, W]`` float weights on ``like``'s device, or None for the whole image."""
+    if mask is None:
+        return None
+    mask = torch.as_tensor(mask, device=like.device)
+    if tuple(mask.shape) != tuple(like.shape[:2]):
+        raise ValueError(f"mask {tuple(mask.shape)} does not match the image {tuple(like.shape[:2])}")
+    return mask.to(like.dtype)
+
+
+def _masked_mean(values: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
+    """Mean of ``values [H, W, C]`` over the weighted pixels (and channels); 0 for an empty mask."""
+    if weights is None:
+        return values.mean()
+    total = (values * weights[..., None]).sum()
+    count = weights.sum() * values.shape[-1]
+    return total / count.clamp_min(1.0)
+
+
+def ssim_map(render: torch.Tensor, target: torch.Tensor, *, window_size: int = SSIM_WINDOW,
+             sigma: float = SSIM_SIGMA) -> torch.Tensor:
+    """Per-pixel SSIM ``[H, W, C]`` of two ``[H, W, C]`` images (3DGS formulation, zero padding)."""
+    render, target = _check_pair(render, target)
+    channels = render.shape[-1]
+    window = gaussian_window(window_size, sigma, dtype=render.dtype, device=render.device)
+    window = window.expand(channels, 1, window_size, window_size).contiguous()  # [C, 1, k, k]
+    x = render.permute(2, 0, 1)[None]  # [1, C, H, W]
+    y = target.permute(2, 0, 1)[None]
+    pad = window_size // 2
+
+    def blur(image: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(image, window, padding=pad, groups=channels)
+
+    mu_x, mu_y = blur(x), blur(y)
+    mu_xx, mu_yy, mu_xy = mu_x * mu_x, mu_y * mu_y, mu_x * mu_y
+    var_x = blur(x * x) - mu_xx
+    var_y = blur(y * y) - mu_yy
+    cov_xy = blur(x * y) - mu_xy
+    numerator = (2.0 * mu_xy + SSIM_C1) * (2.0 * cov_xy + SSIM_C2)
+    denominator = (mu_xx + mu_yy + SSIM_C1) * (var_x + var_y + SSIM_C2)
+    return (numerator / denominator)[0].permute(1, 2, 0)
+
+
+def ssim(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean SSIM (scalar) over the mask (``[H, W]``; None = whole image); 0 for an empty mask."""
+    render, target = _check_pair(render, target)
+    return _masked_mean(ssim_map(render, target), _mask_weights(mask, render))
+
+
+def masked_l1(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean absolute difference (scalar) over the mask and channels; 0 for an empty mask."""
+    render, target = _check_pair(render, target)
+    return _masked_mean((render - target).abs(), _mask_weights(mask, render))
+
+
+def photometric_loss(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None,
+                     lambda_dssim: float = 0.2) -> torch.Tensor:
+    """``(1 - lambda) * L1 + lambda * (1 - SSIM)`` over the finger mask (the paper's loss, lambda 0.2).
+
+    ``render``/``target`` ``[H, W, C]``, ``mask`` ``[H, W]`` (None = whole image). An empty mask
+    gives 0 (both terms vanish) with a zero, finite gradient.
+    """
+    if not 0.0 <= lambda_dssim <= 1.0:
+        raise ValueError(f"lambda_dssim must be in [0, 1], got {lambda_dssim}")
+    render, target = _check_pair(render, target)
+    weights = _mask_weights(mask, render)
+    l1 = _masked_mean((render - target).abs(), weights)
+    if lambda_dssim == 0.0:
+        return l1
+    structure = _masked_mean(1.0 - ssim_map(render, target), weights)
+    return (1.0 - lambda_dssim) * l1 + lambda_dssim * structure

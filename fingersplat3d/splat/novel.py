@@ -1,0 +1,41 @@
+"""Novel views of a fitted model: images, alpha and depth from any camera (the paper's generation step).
+
+Cameras come from :mod:`.camera_path` (the arc between the leftmost and rightmost input cameras,
+or given angles about the rig's axis). Pure torch + numpy; no files.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from ..scene import Camera
+from .fit import near_plane, render_camera
+from .gaussians import Gaussians
+
+__all__ = ["NovelView", "render_views"]
+
+
+@dataclass(frozen=True, eq=False)
+class NovelView:
+    name: str
+    camera: Camera
+    image: np.ndarray  # [H, W] (grayscale model) or [H, W, 3] float32 in [0, 1], black background
+    alpha: np.ndarray  # [H, W] float32 accumulated opacity
+    depth: np.ndarray  # [H, W] float32 camera-frame z, NaN where alpha < min_alpha
+
+
+def render_views(gaussians: Gaussians, cameras: Sequence[tuple[str, Camera]], *, near_fraction: float = 0.01,
+                 min_alpha: float = 0.5) -> list[NovelView]:
+    """Render each ``(name, camera)``; depth is kept where the model is at least ``min_alpha`` opaque."""
+    views = []
+    with torch.no_grad():
+        for name, camera in cameras:
+            out = render_camera(gaussians, camera, near_plane(gaussians.means, camera, near_fraction))
+            image = out.color.clamp(0.0, 1.0).cpu().numpy().astype(np.float32)
+            alpha = out.alpha.cpu().numpy().astype(np.float32)
+            depth = np.where(alpha >= min_alpha, out.depth.cpu().numpy(), np.nan).astype(np.float32)
+            views.append(NovelView(name, camera, image[..., 0] if image.shape[-1] == 1 else image, alpha, depth))
+    return views

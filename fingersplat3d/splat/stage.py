@@ -1,0 +1,100 @@
+"""The splatting stage of ``fs3d fuse``: fused cloud -> initial Gaussians -> fit -> mask cleaning.
+
+Glue between the Open3D cloud, the torch fit (:mod:`.fit`) and the multi-view segmentation
+post-processing (:mod:`fingersplat3d.segment.voting`); returns a typed result with what the
+report needs. Imports Open3D (through :mod:`.init`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from ..scene import Camera, View
+from .config import SplatConfig
+from .fit import default_device, fit_gaussians, gaussian_budget, near_plane, render_camera
+from .gaussians import Gaussians
+
+__all__ = ["SplatStage", "run_splat_stage"]
+
+
+@dataclass(frozen=True, eq=False)
+class SplatStage:
+    gaussians: Gaussians  # cleaned, on the CPU
+    cameras: list[Camera]  # refined poses for the fitted views, the others unchanged
+    depths: list[np.ndarray]  # [H, W] float32 expected depth of the fitted model per view, NaN off the finger
+    report: dict
+
+
+def _initial_gaussians(cloud, channels: int, budget: int, config: SplatConfig, seed: int) -> Gaussians:
+    from .init import gaussians_from_cloud
+
+    if len(cloud.points) > budget:
+        rng = np.random.default_rng(seed)
+        keep = np.sort(rng.choice(len(cloud.points), budget, replace=False))
+        cloud = cloud.select_by_index(keep.tolist())
+    return gaussians_from_cloud(cloud, channels, opacity=config.init_opacity, scale_factor=config.init_scale_factor,
+                                flatten=config.flatten)
+
+
+def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_views: Sequence[int], cloud,
+                    config: SplatConfig, clean_config=None, *, device: torch.device | None = None,
+                    progress: bool = False) -> SplatStage:
+    """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks."""
+    from ..eval.image import masked_psnr
+    from ..segment.voting import CleanConfig, clean_with_masks
+
+    device = default_device() if device is None else torch.device(device)
+    clean_config = CleanConfig() if clean_config is None else clean_config
+    train_views = [views[v] for v in fitted_views]
+    train_cameras = [cameras[v] for v in fitted_views]
+    budget = gaussian_budget(train_views, config)
+    initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
+    fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, progress=progress)
+    started = time.perf_counter()
+    masks = [view.mask for view in train_views]
+    model = fit.gaussians
+    outside_before = _alpha_outside(model, fit.cameras, masks, config)
+    cleaned, clean_stats = clean_with_masks(model, fit.cameras, masks, clean_config)
+    outside_after = _alpha_outside(cleaned, fit.cameras, masks, config)
+    clean_seconds = time.perf_counter() - started
+    refined = list(cameras)
+    for k, v in enumerate(fitted_views):
+        refined[v] = fit.cameras[k]
+    depths, psnrs = [], {}
+    with torch.no_grad():
+        for view, camera in zip(views, refined):
+            out = render_camera(cleaned, camera, near_plane(cleaned.means, camera, config.near_fraction))
+            alpha = out.alpha.cpu().numpy()
+            depth = np.where((alpha > 0.5) & view.mask, out.depth.cpu().numpy(), np.nan).astype(np.float32)
+            depths.append(depth)
+            color = out.color.cpu().numpy()
+            psnrs[view.name] = round(masked_psnr(color[..., 0] if color.shape[-1] == 1 else color, view.image, view.mask), 2)
+    corrections = {views[v].name: round(_rotation_change_deg(cameras[v], refined[v]), 3) for v in fitted_views}
+    report = {"config": config.__dict__ | {}, "device": str(device), "budget": fit.budget,
+              "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
+              "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
+              "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
+              "densify": [d.__dict__ for d in fit.densify], "psnr_in_mask_db": psnrs,
+              "pose_correction_deg": corrections, "clean": clean_stats._asdict() if hasattr(clean_stats, "_asdict") else
+              dict(clean_stats.__dict__), "alpha_outside_mask": {"before": outside_before, "after": outside_after}}
+    return SplatStage(cleaned.to("cpu"), refined, depths, report)
+
+
+def _alpha_outside(model: Gaussians, cameras: Sequence[Camera], masks, config: SplatConfig) -> float:
+    from ..eval.image import fraction_alpha_outside
+
+    values = []
+    with torch.no_grad():
+        for camera, mask in zip(cameras, masks):
+            out = render_camera(model, camera, near_plane(model.means, camera, config.near_fraction))
+            values.append(fraction_alpha_outside(out.alpha.cpu().numpy(), mask))
+    return round(float(np.mean(values)), 5)
+
+
+def _rotation_change_deg(before: Camera, after: Camera) -> float:
+    relative = after.rotation @ before.rotation.T
+    return float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1.0, 1.0))))

@@ -1,0 +1,165 @@
+"""Fitting Gaussians: presets, budget, density control, pose refinement, convergence on a known scene."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from fingersplat3d.scene import Camera, View, look_at
+from fingersplat3d.splat import Gaussians, rgb_to_sh
+from fingersplat3d.splat.config import PRESETS, SplatConfig, preset
+from fingersplat3d.splat.fit import fit_camera, fit_gaussians, gaussian_budget, render_camera
+from fingersplat3d.splat.strategy import GradientStats, densify_and_prune, gaussians_of
+
+
+def test_presets_trade_time_for_detail():
+    fast, balanced, accurate = PRESETS["fast"], PRESETS["balanced"], PRESETS["accurate"]
+    assert fast.iterations < balanced.iterations < accurate.iterations
+    assert fast.gaussians_per_cell <= balanced.gaussians_per_cell <= accurate.gaussians_per_cell
+    assert preset("fast", iterations=7).iterations == 7 and preset("fast", iterations=None) == fast
+    with pytest.raises(ValueError, match="unknown splat preset"):
+        preset("fastest")
+    with pytest.raises(ValueError, match="unknown splat setting"):
+        preset("fast", iteration=3)
+    with pytest.raises(ValueError):
+        SplatConfig(iterations=-1)
+
+
+def _striped_view(period: float, size=(160, 128), box=(20, 140, 30, 100)) -> View:
+    x = np.arange(size[0])[None, :].repeat(size[1], 0)
+    image = (0.5 + 0.3 * np.sin(2 * np.pi * x / period)).astype(np.float32)
+    mask = np.zeros((size[1], size[0]), bool)
+    mask[box[2]:box[3], box[0]:box[1]] = True
+    return View("v", np.where(mask, image, 0.03).astype(np.float32), mask)
+
+
+def test_budget_follows_finger_area_and_ridge_frequency():
+    config = SplatConfig(min_gaussians=1, view_overlap=1.0)
+    coarse, fine = gaussian_budget([_striped_view(12.0)], config), gaussian_budget([_striped_view(6.0)], config)
+    assert 3.0 < fine / coarse < 5.0  # (period / 4)^2 cells: half the period, four times the Gaussians
+    small = gaussian_budget([_striped_view(12.0, box=(20, 80, 30, 100))], config)
+    assert 0.4 < small / coarse < 0.6  # half the area, half the budget
+    assert gaussian_budget([_striped_view(12.0)], replace(config, gaussians_per_cell=2.0)) == pytest.approx(2 * coarse, rel=0.01)
+    assert gaussian_budget([_striped_view(12.0)], replace(config, max_gaussians=50, min_gaussians=10)) == 50
+
+
+def _plane_scene(n_side=14, channels=1, seed=0):
+    """A textured square of Gaussians at z = 0 seen by cameras 10 units away."""
+    generator = torch.Generator().manual_seed(seed)
+    u = torch.linspace(-1.0, 1.0, n_side)
+    grid = torch.stack(torch.meshgrid(u, u, indexing="xy"), -1).reshape(-1, 2)
+    n = len(grid)
+    means = torch.cat([grid, torch.zeros(n, 1)], 1)
+    colours = 0.5 + 0.35 * torch.sin(3.0 * grid[:, :1] * math.pi)
+    colours = colours.repeat(1, channels) if channels > 1 else colours
+    spacing = 2.0 / (n_side - 1)
+    return Gaussians(means, torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1), torch.full((n, 3), math.log(0.6 * spacing)),
+                     torch.full((n,), 2.0), rgb_to_sh(colours))
+
+
+def _cameras(angles=(-20.0, 20.0), size=(64, 48)):
+    cameras = []
+    for angle in angles:
+        eye = 10.0 * np.array([np.sin(np.radians(angle)), 0.0, -np.cos(np.radians(angle))])
+        cameras.append(Camera.from_focal(90.0, size[0], size[1], look_at(eye, [0, 0, 0], [0, -1, 0])))
+    return cameras
+
+
+def _views(truth: Gaussians, cameras):
+    views = []
+    for k, camera in enumerate(cameras):
+        with torch.no_grad():
+            out = render_camera(truth, camera, near=0.1)
+        mask = out.alpha.numpy() > 0.5
+        views.append(View(f"v{k}", out.color.numpy()[..., 0], mask))
+    return views
+
+
+def test_fit_recovers_a_known_scene_from_a_perturbed_start():
+    truth = _plane_scene()
+    cameras = _cameras()
+    views = _views(truth, cameras)
+    generator = torch.Generator().manual_seed(1)
+    start = truth.with_(sh_dc=truth.sh_dc + 0.8 * torch.randn(truth.sh_dc.shape, generator=generator),
+                        means=truth.means + 0.02 * torch.randn(truth.means.shape, generator=generator))
+    config = SplatConfig(iterations=60, refine_poses=False, densify_from=1000, lr_colors=0.1, lr_means=1e-3,
+                         lr_means_final=1e-4, min_gaussians=1)
+    fit = fit_gaussians(start, views, cameras, config, device="cpu")
+    assert len(fit.losses) == 60 and all(math.isfinite(x) for x in fit.losses)
+    assert np.mean(fit.losses[-10:]) < 0.35 * np.mean(fit.losses[:3])
+    colour_error = lambda g: float((g.colors - truth.colors).abs().mean())  # noqa: E731
+    assert colour_error(fit.gaussians) < 0.5 * colour_error(start)
+
+
+def test_density_control_respects_budget_and_keeps_adam_state():
+    model = _plane_scene(n_side=10)
+    parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
+    optimizer = torch.optim.Adam([{"params": [p], "lr": 1e-3} for p in parameters])
+    sum(p.sum() for p in parameters).backward()
+    optimizer.step()
+    n = len(model)
+    stats = GradientStats.zeros(n, torch.device("cpu"))
+    stats.add(torch.full((n, 2), 1.0), torch.ones(n, dtype=torch.int32), 64, 48)
+    with torch.no_grad():  # make the first 10 Gaussians transparent: they must go
+        optimizer.param_groups[3]["params"][0][:10] = -20.0
+    config = SplatConfig(percent_dense=0.05, prune_opacity=0.005)
+    result = densify_and_prune(optimizer, stats, config, extent=2.0, budget=n + 15,
+                               generator=torch.Generator().manual_seed(0))
+    grown = gaussians_of(optimizer)
+    assert result.pruned == 10 and result.cloned + result.split == 25  # budget: n - 10 kept + 25 new = n + 15
+    assert len(grown) == result.total == n + 15  # a split replaces one Gaussian by two: +1 each
+    for group in optimizer.param_groups[:5]:
+        parameter = group["params"][0]
+        state = optimizer.state[parameter]
+        assert state["exp_avg"].shape == parameter.shape and state["exp_avg_sq"].shape == parameter.shape
+    assert len(stats.mean()) == len(grown)
+
+
+def test_split_children_are_smaller_and_inside_the_parent():
+    model = _plane_scene(n_side=4)
+    parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
+    optimizer = torch.optim.Adam([{"params": [p]} for p in parameters])
+    stats = GradientStats.zeros(len(model), torch.device("cpu"))
+    stats.add(torch.ones(len(model), 2), torch.ones(len(model), dtype=torch.int32), 64, 48)
+    result = densify_and_prune(optimizer, stats, SplatConfig(percent_dense=0.0), extent=10.0, budget=100,
+                               generator=torch.Generator().manual_seed(0))
+    grown = gaussians_of(optimizer)
+    assert result.split == len(model) and len(grown) == 2 * len(model)
+    assert torch.allclose(grown.scales, model.scales.repeat(2, 1) / 1.6, rtol=1e-5)
+    offsets = (grown.means - model.means.repeat(2, 1)).norm(dim=-1) / model.scales.max(-1).values.repeat(2)
+    assert offsets.max() < 5.0
+
+
+def test_pose_refinement_and_test_view_alignment_recover_a_perturbed_camera():
+    truth = _plane_scene(n_side=20)
+    cameras = _cameras(angles=(-15.0, 0.0, 15.0), size=(96, 72))
+    views = _views(truth, cameras)
+    pose = cameras[2].world_to_cam.copy()
+    nudge = np.eye(4)
+    angle = np.radians(1.0)
+    nudge[:3, :3] = [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
+    wrong = Camera(cameras[2].K, nudge @ pose, 96, 72)
+    aligned = fit_camera(truth, wrong, views[2].image, views[2].mask, iterations=120, lr_rotation=3e-3)
+
+    def angle_to_truth(camera):
+        relative = camera.rotation @ cameras[2].rotation.T
+        return np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1)))
+
+    assert angle_to_truth(wrong) == pytest.approx(1.0, abs=1e-6)
+    assert angle_to_truth(aligned) < 0.3
+    config = SplatConfig(iterations=90, refine_poses=True, lr_pose_rotation=3e-3, densify_from=1000,
+                         lr_colors=0.0, lr_means=0.0, lr_means_final=0.0, lr_scales=0.0, lr_quats=0.0, lr_opacity=0.0)
+    fit = fit_gaussians(truth, views, [cameras[0], cameras[1], wrong], config, device="cpu")
+    assert angle_to_truth(fit.cameras[2]) < 0.5 * angle_to_truth(wrong)
+    assert np.allclose(fit.cameras[0].world_to_cam, cameras[0].world_to_cam)  # the gauge view never moves
+
+
+def test_rgb_model_has_three_channels_and_grayscale_mismatch_is_an_error():
+    truth = _plane_scene(channels=3)
+    cameras = _cameras()
+    gray_views = [View(f"v{k}", np.zeros((48, 64), np.float32), np.ones((48, 64), bool)) for k in range(2)]
+    with pytest.raises(ValueError, match="colour channel"):
+        fit_gaussians(truth, gray_views, cameras, SplatConfig(iterations=1), device="cpu")
+    with torch.no_grad():
+        assert render_camera(truth, cameras[0], near=0.1).color.shape == (48, 64, 3)

@@ -1,0 +1,136 @@
+"""Throughput of the fast rasterizer on a finger-like scene.
+
+    python tools/bench_rasterizer.py [--quick] [--out FILE.md] [--repeats 3] [--threads 2]
+
+The scene is a fitted-surface stand-in: Gaussians spread evenly over the camera-facing half of a
+cylinder (a finger, axis vertical) that fills ~40 % of a 640x512 image, flat disks tangent to the
+surface whose in-plane scale is the point spacing (neighbours overlap, as after fitting), opacity
+0.5..1 and a grayscale ridge pattern. The main figure is forward+backward of one 640x512 view with
+200k Gaussians (target <= 0.3 s on the project's 2-core machine); a sweep varies N and the scale.
+
+Throughput is counted in Gaussian-pixel pairs: ``pairs`` are the pairs with alpha >= 1/255 (the
+work the result depends on), ``evaluated`` the pairs the tiled compositor actually computes
+(tile_size**2 pixels per tile-Gaussian pair, plus padding). Times are medians over repeats.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from benchmachine import machine  # noqa: E402
+
+from fingersplat3d.splat import matrix_to_quaternion, project_gaussians, rasterize  # noqa: E402
+from fingersplat3d.splat.binning import bin_gaussians  # noqa: E402
+from fingersplat3d.splat.project import ALPHA_MIN, _project  # noqa: E402
+
+WIDTH, HEIGHT = 640, 512
+FOCAL = 1320.0
+DISTANCE = 60.0  # mm, camera to cylinder axis
+RADIUS = 8.0  # mm
+LENGTH = 16.9  # mm along the axis: 2r x L projects onto ~40 % of the image
+
+
+def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int = 0):
+    """``(means, quats, scales, opacities, colors, world_to_cam, K)`` float32, camera at the origin."""
+    g = torch.Generator().manual_seed(seed)
+    theta = (torch.rand(n, generator=g) - 0.5) * math.pi  # facing the camera: -90..90 degrees
+    height = (torch.rand(n, generator=g) - 0.5) * LENGTH
+    normal = torch.stack([torch.sin(theta), torch.zeros(n), -torch.cos(theta)], -1)  # towards the camera
+    means = torch.stack([RADIUS * torch.sin(theta), height, DISTANCE - RADIUS * torch.cos(theta)], -1)
+    spacing = math.sqrt(math.pi * RADIUS * LENGTH / n)
+    axis = torch.tensor([0.0, 1.0, 0.0]).expand(n, 3)
+    tangent = torch.cross(axis, normal, dim=-1)
+    rotation = torch.stack([tangent, axis, normal], -1)  # columns: the Gaussian's local axes
+    quats = matrix_to_quaternion(rotation)
+    scales = torch.stack([torch.full((n,), spacing), torch.full((n,), spacing), torch.full((n,), 0.1 * spacing)], -1)
+    scales = scales * scale_factor * torch.exp(0.2 * torch.randn(n, 3, generator=g))
+    opacities = 0.5 + 0.5 * torch.rand(n, generator=g)
+    ridges = 0.5 + 0.4 * torch.sin(2 * math.pi * (means[:, 0] + 0.3 * means[:, 1]) / 0.45)
+    colors = ridges[:, None].expand(n, channels).contiguous()
+    K = torch.tensor([[FOCAL, 0, (WIDTH - 1) / 2], [0, FOCAL, (HEIGHT - 1) / 2], [0, 0, 1]])
+    return means, quats, scales, opacities, colors, torch.eye(4), K
+
+
+def count_pairs(scene, tile_size: int) -> tuple[int, int, float]:
+    """(pairs with alpha >= 1/255, pairs the compositor evaluates, fraction of the image covered)."""
+    means, quats, scales, opacities, colors, world_to_cam, K = scene
+    with torch.no_grad():
+        proj, boxes = _project(means, quats, scales, world_to_cam, K, WIDTH, HEIGHT, 0.01, 0.3, opacities)
+        bins = bin_gaussians(boxes, proj.valid, proj.depths, WIDTH, HEIGHT, tile_size)
+        evaluated = sum(g.gaussians.numel() for g in bins.groups) * tile_size ** 2
+        # Exact pair count, box by box (vectorised over Gaussians, looped over box offsets).
+        pairs = 0
+        x0, y0, x1, y1 = boxes.unbind(-1)
+        m, c, o = proj.means2d.double(), proj.conics.double(), opacities.double()
+        v = proj.valid
+        widest = int((x1 - x0)[v].max()) + 1 if v.any() else 0
+        tallest = int((y1 - y0)[v].max()) + 1 if v.any() else 0
+        for dy in range(tallest):
+            for dx in range(widest):
+                px, py = x0 + dx, y0 + dy
+                inside = v & (px <= x1) & (py <= y1)
+                ox, oy = px - m[:, 0], py - m[:, 1]
+                q = c[:, 0] * ox * ox + 2 * c[:, 1] * ox * oy + c[:, 2] * oy * oy
+                pairs += int((inside & (q >= 0) & (o * torch.exp(-0.5 * q) >= ALPHA_MIN)).sum())
+        covered = float((rasterize(*scene, WIDTH, HEIGHT).alpha > 0.5).float().mean())
+    return pairs, evaluated, covered
+
+
+def time_render(scene, repeats: int, tile_size: int) -> tuple[float, float]:
+    """Median forward and backward seconds of a render plus an L1-like loss."""
+    leaves = [t.clone().requires_grad_() for t in scene[:5]] + list(scene[5:])
+    forward, backward = [], []
+    for _ in range(repeats + 1):  # the first is a warm-up
+        for t in leaves[:5]:
+            t.grad = None
+        start = time.perf_counter()
+        out = rasterize(*leaves, WIDTH, HEIGHT, tile_size=tile_size)
+        loss = out.color.sum() + out.depth.sum()
+        middle = time.perf_counter()
+        loss.backward()
+        end = time.perf_counter()
+        forward.append(middle - start)
+        backward.append(end - middle)
+    return sorted(forward[1:])[repeats // 2], sorted(backward[1:])[repeats // 2]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="main figure only, 1 repeat")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--tile-size", type=int, default=4)
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    repeats = 1 if args.quick else args.repeats
+    info = machine()
+    lines = [f"Machine: {info['cpu']}, {info['cores']} cores, load {tuple(round(x, 2) for x in info['load'])}, "
+             f"torch {info['torch']}, {args.threads} threads, tile {args.tile_size}", "",
+             "| N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | total s | "
+             "fwd Mpairs/s | bwd Mpairs/s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    print(lines[0], flush=True)
+    cases = [(200_000, 1.0)]
+    if not args.quick:
+        cases += [(25_000, 1.0), (50_000, 1.0), (100_000, 1.0), (400_000, 1.0), (200_000, 0.5), (200_000, 2.0),
+                  (200_000, 4.0)]
+    for n, factor in cases:
+        scene = finger_scene(n, factor)
+        pairs, evaluated, covered = count_pairs(scene, args.tile_size)
+        fwd, bwd = time_render(scene, repeats, args.tile_size)
+        row = (f"| {n // 1000}k | {factor:g} | {covered:.0%} | {pairs / 1e6:.1f} | {evaluated / 1e6:.1f} | {fwd:.3f} | "
+               f"{bwd:.3f} | {fwd + bwd:.3f} | {pairs / fwd / 1e6:.0f} | {pairs / bwd / 1e6:.0f} |")
+        lines.append(row)
+        print(row, flush=True)
+    if args.out:
+        args.out.write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
