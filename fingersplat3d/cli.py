@@ -297,12 +297,15 @@ def _run_render(args: argparse.Namespace) -> int:
     gaussians = read_gaussians_ply(folder / "gaussians.ply").to(default_device())
     inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]
     start = time.perf_counter()
-    if args.angles:
-        novel = cameras_at_angles(inputs, args.angles)
-        names = [f"angle_{a:+07.2f}".replace(".", "p") for a in args.angles]
-    else:
-        novel = arc_cameras(inputs, args.count)
-        names = [f"arc_{k:02d}" for k in range(len(novel))]
+    try:
+        if args.angles:
+            novel = cameras_at_angles(inputs, args.angles)
+            names = [f"angle_{a:+07.2f}".replace(".", "p") for a in args.angles]
+        else:
+            novel = arc_cameras(inputs, args.count)
+            names = [f"arc_{k:02d}" for k in range(len(novel))]
+    except ValueError as error:  # one camera, or cameras that did not align: no rig axis to turn about
+        raise InputError(f"{folder / 'cameras.json'}: cannot place novel views: {error}") from None
     views = render_views(gaussians, list(zip(names, novel)))
     write_renders(output, views, cameras.units, cameras.scale_mm_per_unit, overwrite=args.overwrite)
     print(f"wrote {output}: {len(views)} views of {len(gaussians)} Gaussians in {time.perf_counter() - start:.1f} s")

@@ -150,7 +150,7 @@ def test_exp_depth_mode_keeps_direction_and_maps_the_norm():
     assert torch.equal(points[1], torch.zeros(3))
 
 
-@pytest.mark.parametrize("head_type, size", [("linear", (48, 80)), ("dpt", (48, 80)), ("dpt", (64, 32))])
+@pytest.mark.parametrize("head_type, size", [("linear", (48, 80)), ("dpt", (48, 80))])  # 3 x 5 patches: odd grid
 def test_network_outputs_match_the_input_size_and_are_batch_independent(head_type, size):
     model = tiny_model(head_type)
     torch.manual_seed(1)

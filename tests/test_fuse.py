@@ -76,13 +76,25 @@ def test_metric_hints_make_millimetres(uwa):
 
 def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     out = tmp_path / "rec"
-    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(out), "--mesh", "--no-splat"]) == 0
+    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(out), "--mesh", "--splat-preset", "fast",
+                 "--splat-iterations", "4"]) == 0
     assert "wrote" in capsys.readouterr().out
     import pymeshlab
 
     meshset = pymeshlab.MeshSet()
     meshset.load_new_mesh(str(out / "mesh.ply"))
     assert meshset.current_mesh().face_number() > 1000
+    # gaussians.ply: the standard 3DGS layout, opens in MeshLab, one Gaussian per vertex.
+    meshset.load_new_mesh(str(out / "gaussians.ply"))
+    report = json.loads((out / "report.json").read_text())
+    assert meshset.current_mesh().vertex_number() == report["splat"]["gaussians"] > 1000
+    assert report["stages"]["splat"]["seconds"] > 0 and len(report["splat"]["psnr_in_mask_db"]) == 3
+    # Novel views on the arc from the leftmost to the rightmost camera.
+    assert main(["render", str(out), "--count", "3", "--scale", "0.25"]) == 0
+    renders = sorted(p.name for p in (out / "renders").glob("arc_*.png"))
+    assert renders == ["arc_00.png", "arc_00_alpha.png", "arc_01.png", "arc_01_alpha.png", "arc_02.png", "arc_02_alpha.png"]
+    assert (out / "renders" / "contact_sheet.png").is_file() and (out / "renders" / "depth" / "arc_01.npy").is_file()
+    assert main(["render", str(out)]) == 2  # renders/ exists: refuses without --overwrite
     # The same images given as a list of files.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
     assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat"]) == 0

@@ -187,3 +187,23 @@ def test_importing_the_rasterizer_does_not_load_open3d():
     code = ("import sys, fingersplat3d.splat.rasterize, fingersplat3d.splat.reference, fingersplat3d.splat.project; "
             "assert 'open3d' not in sys.modules, 'open3d was imported'")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.slow
+def test_compiled_path_matches_the_eager_path():
+    # torch.compile kernels (first call compiles for tens of seconds): same outputs and gradients.
+    args, width, height = random_scene(12, n=300, channels=3, dtype=torch.float32, width=64, height=48)
+    args[2] = args[2] * 2.0
+    results = []
+    for compiled in (False, True):
+        leaves = [t.clone().requires_grad_() for t in args]
+        out = rasterize(*leaves, width, height, compiled=compiled, background=torch.tensor([0.1, 0.2, 0.3]))
+        grads = torch.autograd.grad(weighted_loss(out), leaves)
+        results.append((out, grads))
+    (eager, eager_grads), (fast, fast_grads) = results
+    assert eager.alpha.max() > 0.5
+    for name in ("color", "alpha", "depth", "means2d"):
+        torch.testing.assert_close(getattr(fast, name), getattr(eager, name), rtol=1e-4, atol=1e-5, msg=name)
+    assert torch.equal(fast.radii, eager.radii)
+    for a, b in zip(fast_grads, eager_grads):
+        torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-4 * b.abs().max().item())

@@ -1,6 +1,7 @@
 """Throughput of the fast rasterizer on a finger-like scene.
 
-    python tools/bench_rasterizer.py [--quick] [--out FILE.md] [--repeats 3] [--threads 2]
+    python tools/bench_rasterizer.py [--quick] [--out FILE.md] [--repeats 5] [--threads 2]
+                                     [--paths compiled,eager] [--tile-size 4]
 
 The scene is a fitted-surface stand-in: Gaussians spread evenly over the camera-facing half of a
 cylinder (a finger, axis vertical) that fills ~40 % of a 640x512 image, flat disks tangent to the
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -25,9 +27,10 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchmachine import machine  # noqa: E402
 
-from fingersplat3d.splat import matrix_to_quaternion, project_gaussians, rasterize  # noqa: E402
+from fingersplat3d.splat import matrix_to_quaternion, rasterize  # noqa: E402
 from fingersplat3d.splat.binning import bin_gaussians  # noqa: E402
-from fingersplat3d.splat.project import ALPHA_MIN, _project  # noqa: E402
+from fingersplat3d.splat.composite import _grid, _tile_centres, pair_alpha  # noqa: E402
+from fingersplat3d.splat.project import _project  # noqa: E402
 
 WIDTH, HEIGHT = 640, 512
 FOCAL = 1320.0
@@ -63,71 +66,73 @@ def count_pairs(scene, tile_size: int) -> tuple[int, int, float]:
     with torch.no_grad():
         proj, boxes = _project(means, quats, scales, world_to_cam, K, WIDTH, HEIGHT, 0.01, 0.3, opacities)
         bins = bin_gaussians(boxes, proj.valid, proj.depths, WIDTH, HEIGHT, tile_size)
-        evaluated = sum(g.gaussians.numel() for g in bins.groups) * tile_size ** 2
-        # Exact pair count, box by box (vectorised over Gaussians, looped over box offsets).
-        pairs = 0
-        x0, y0, x1, y1 = boxes.unbind(-1)
-        m, c, o = proj.means2d.double(), proj.conics.double(), opacities.double()
-        v = proj.valid
-        widest = int((x1 - x0)[v].max()) + 1 if v.any() else 0
-        tallest = int((y1 - y0)[v].max()) + 1 if v.any() else 0
-        for dy in range(tallest):
-            for dx in range(widest):
-                px, py = x0 + dx, y0 + dy
-                inside = v & (px <= x1) & (py <= y1)
-                ox, oy = px - m[:, 0], py - m[:, 1]
-                q = c[:, 0] * ox * ox + 2 * c[:, 1] * ox * oy + c[:, 2] * oy * oy
-                pairs += int((inside & (q >= 0) & (o * torch.exp(-0.5 * q) >= ALPHA_MIN)).sum())
+        table = torch.cat([proj.means2d, proj.conics, opacities[:, None]], 1)
+        table = torch.cat([table, table.new_zeros(1, 6)])
+        grid, _ = _grid(tile_size, torch.float32, means.device)
+        pairs = evaluated = 0
+        for group in bins.groups:
+            for members, tiles in zip(torch.split(group.gaussians, 2048), torch.split(group.tiles, 2048)):
+                params = table[members]
+                params[..., :2] -= _tile_centres(tiles, bins, torch.float32)[:, None, :]
+                pairs += int((pair_alpha(params, grid)[0] > 0).sum())
+                evaluated += members.numel() * tile_size ** 2
         covered = float((rasterize(*scene, WIDTH, HEIGHT).alpha > 0.5).float().mean())
     return pairs, evaluated, covered
 
 
-def time_render(scene, repeats: int, tile_size: int) -> tuple[float, float]:
-    """Median forward and backward seconds of a render plus an L1-like loss."""
+def time_render(scene, repeats: int, tile_size: int, compiled: bool) -> tuple[float, float, float]:
+    """(median forward s, median backward s, fastest forward+backward s) of a render plus a loss."""
     leaves = [t.clone().requires_grad_() for t in scene[:5]] + list(scene[5:])
     forward, backward = [], []
-    for _ in range(repeats + 1):  # the first is a warm-up
+    for _ in range(repeats + 1):  # the first is a warm-up (and compiles, for the compiled path)
         for t in leaves[:5]:
             t.grad = None
         start = time.perf_counter()
-        out = rasterize(*leaves, WIDTH, HEIGHT, tile_size=tile_size)
+        out = rasterize(*leaves, WIDTH, HEIGHT, tile_size=tile_size, compiled=compiled)
         loss = out.color.sum() + out.depth.sum()
         middle = time.perf_counter()
         loss.backward()
         end = time.perf_counter()
         forward.append(middle - start)
         backward.append(end - middle)
-    return sorted(forward[1:])[repeats // 2], sorted(backward[1:])[repeats // 2]
+    forward, backward = forward[1:], backward[1:]
+    fastest = min(f + b for f, b in zip(forward, backward))
+    return sorted(forward)[len(forward) // 2], sorted(backward)[len(backward) // 2], fastest
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="main figure only, 1 repeat")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="main figure only")
+    parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--tile-size", type=int, default=4)
+    parser.add_argument("--paths", default="compiled,eager", help="comma-separated: compiled, eager")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    repeats = 1 if args.quick else args.repeats
     info = machine()
-    lines = [f"Machine: {info['cpu']}, {info['cores']} cores, load {tuple(round(x, 2) for x in info['load'])}, "
-             f"torch {info['torch']}, {args.threads} threads, tile {args.tile_size}", "",
-             "| N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | total s | "
-             "fwd Mpairs/s | bwd Mpairs/s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    start_load = tuple(round(x, 2) for x in info["load"])
+    lines = [f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
+             f"tile {args.tile_size}, load average at start {start_load}", "",
+             "| path | N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
+             "fwd Mpairs/s | bwd Mpairs/s | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print(lines[0], flush=True)
     cases = [(200_000, 1.0)]
     if not args.quick:
         cases += [(25_000, 1.0), (50_000, 1.0), (100_000, 1.0), (400_000, 1.0), (200_000, 0.5), (200_000, 2.0),
                   (200_000, 4.0)]
-    for n, factor in cases:
-        scene = finger_scene(n, factor)
-        pairs, evaluated, covered = count_pairs(scene, args.tile_size)
-        fwd, bwd = time_render(scene, repeats, args.tile_size)
-        row = (f"| {n // 1000}k | {factor:g} | {covered:.0%} | {pairs / 1e6:.1f} | {evaluated / 1e6:.1f} | {fwd:.3f} | "
-               f"{bwd:.3f} | {fwd + bwd:.3f} | {pairs / fwd / 1e6:.0f} | {pairs / bwd / 1e6:.0f} |")
-        lines.append(row)
-        print(row, flush=True)
+    for path in args.paths.split(","):
+        for n, factor in cases:
+            scene = finger_scene(n, factor)
+            pairs, evaluated, covered = count_pairs(scene, args.tile_size)
+            fwd, bwd, best = time_render(scene, args.repeats, args.tile_size, path == "compiled")
+            row = (f"| {path} | {n // 1000}k | {factor:g} | {covered:.0%} | {pairs / 1e6:.1f} | {evaluated / 1e6:.1f} | "
+                   f"{fwd:.3f} | {bwd:.3f} | {fwd + bwd:.3f} ({best:.3f}) | {pairs / fwd / 1e6:.0f} | "
+                   f"{pairs / bwd / 1e6:.0f} | {os.getloadavg()[0]:.1f} |")
+            lines.append(row)
+            print(row, flush=True)
+    lines += ["", "Times are medians over the repeats (best fwd+bwd in brackets); pairs/s = alpha >= 1/255 pairs "
+              "per second. The machine is shared: the load column is the 1-minute load average after each row."]
     if args.out:
         args.out.write_text("\n".join(lines) + "\n")
 

@@ -19,6 +19,7 @@ pixel correspondences. Both come from the pair's points:
    the step-2 inliers, and not hidden: its depth agrees with the other view's own depth there
    within ``occlusion_tolerance`` (a fraction of the median depth). At most
    ``max_correspondences`` per direction are kept (uniform random subset).
+4. the pair fails when too few correspondences remain or the step-2 residual is above ``max_residual``.
 
 Weights are ``t(c_pair) * t(c_own)``, with ``t = log`` for DUSt3R's confidences (>= 1; upstream's
 ``conf_trf='log'``) or the identity. A pair that cannot be registered is not an error: the result
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..pointmaps.base import PairPointmaps, Pointmap
-from .global_opt import PairCorrespondences
+from .global_opt import PairCorrespondences, _weighted_median
 from .procrustes import Similarity, umeyama
 
 __all__ = ["PointmapPairConfig", "PointmapPairRegistration", "register_pointmap_pair", "frame_similarity"]
@@ -57,6 +58,10 @@ class PointmapPairConfig:
     more than this fraction of the median depth."""
     min_correspondences: int = 8
     """Fewer kept correspondences make the pair fail."""
+    max_residual: float = 0.25
+    """A relative residual (see :attr:`PointmapPairRegistration.residual`) above this makes the pair
+    fail: the pair's points and the own-frame pointmaps do not describe one rigid scene (exact
+    pointmaps give ~1e-7, unrelated ones ~1). A guard, not a tuned value."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,13 +214,10 @@ def register_pointmap_pair(pointmap_a: Pointmap, pointmap_b: Pointmap, pair_ab: 
     centre = np.average(dst_all[inlier], axis=0, weights=w_all[inlier])
     radius = float(np.sqrt(np.average(((dst_all[inlier] - centre) ** 2).sum(1), weights=w_all[inlier])))
     rms = float(np.sqrt(np.average(residual[inlier] ** 2, weights=w_all[inlier])))
+    relative_residual = rms / max(radius, 1e-300)
+    if not relative_residual <= config.max_residual:
+        return failed(f"the pointmaps disagree: relative residual {relative_residual:.2f} after alignment "
+                      f"(at most {config.max_residual:g} accepted)")
     correspondences = PairCorrespondences(a, b, uv_a, uv_b, kept_weight, model.as_matrix())
-    return PointmapPairRegistration(a, b, model, correspondences, rms / max(radius, 1e-300), len(kept_weight), True)
+    return PointmapPairRegistration(a, b, model, correspondences, relative_residual, len(kept_weight), True)
 
-
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
-    if cumulative[-1] <= 0:
-        return float(np.median(values))
-    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])

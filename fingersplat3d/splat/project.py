@@ -63,33 +63,54 @@ def _check(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor, K
 
 
 def _project(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor, K: Tensor,
-             width: int, height: int, near: float, low_pass: float, opacities: Tensor | None):
-    """The projection plus the integer footprint boxes the binning needs (float64 inside)."""
+             width: int, height: int, near: float, low_pass: float, opacities: Tensor | None,
+             compiled: bool = False) -> tuple[Projection, Tensor]:
+    """The projection plus the integer footprint boxes ``[N, 4]`` the binning needs."""
+    near = float(torch.tensor(near, dtype=means.dtype))  # "on the near plane" means equal in the input dtype
+    core = _compiled_core() if compiled else _project_core
+    *fields, boxes = core(means, quats, scales, world_to_cam, K, width, height, near, low_pass, opacities)
+    return Projection(*fields), boxes
+
+
+_COMPILED_CORE = None
+
+
+def _compiled_core():
+    """:func:`_project_core` through ``torch.compile`` (N dynamic), compiled on first use."""
+    global _COMPILED_CORE
+    if _COMPILED_CORE is None:
+        _COMPILED_CORE = torch.compile(_project_core, dynamic=True)
+    return _COMPILED_CORE
+
+
+def _project_core(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor, K: Tensor,
+                  width: int, height: int, near: float, low_pass: float, opacities: Tensor | None):
+    """Projection fields and boxes as a tuple, float64 inside (see the module docstring)."""
     dtype = means.dtype
     f64 = torch.float64
     rotation = world_to_cam[:3, :3].to(f64)  # [3, 3]
     p_cam = means.to(f64) @ rotation.T + world_to_cam[:3, 3].to(f64)  # [N, 3]
     x, y, z = p_cam.unbind(-1)
-    near = float(torch.tensor(near, dtype=dtype))  # "on the near plane" means equal in the input dtype
     in_front = (z >= near) & torch.isfinite(p_cam).all(-1)
     z_safe = torch.where(in_front, z, torch.ones_like(z))  # no division by ~0 anywhere, even in masked lanes
     fx, fy, cx, cy = K[0, 0].to(f64), K[1, 1].to(f64), K[0, 2].to(f64), K[1, 2].to(f64)
     u = torch.where(in_front, fx * x / z_safe + cx, torch.zeros_like(z))
     v = torch.where(in_front, fy * y / z_safe + cy, torch.zeros_like(z))
 
-    # Jacobian of (fx x/z + cx, fy y/z + cy) at the clamped point: [N, 2, 3].
+    # cov2d = T T^T with T = J R_wc R_q S ([N, 2, 3], PSD by construction) and J the Jacobian of
+    # (fx x/z + cx, fy y/z + cy) at the clamped point, J = [[fx/z, 0, -fx tx/z], [0, fy/z, -fy ty/z]]
+    # with tx, ty the clamped x/z, y/z.
+    # Written out per row: batched 3x3 matmuls over N are slow on CPU.
     lim_x_neg, lim_x_pos = (cx + FRUSTUM_MARGIN * width) / fx, (width - cx + FRUSTUM_MARGIN * width) / fx
     lim_y_neg, lim_y_pos = (cy + FRUSTUM_MARGIN * height) / fy, (height - cy + FRUSTUM_MARGIN * height) / fy
     tx = torch.maximum(torch.minimum(x / z_safe, lim_x_pos), -lim_x_neg)
     ty = torch.maximum(torch.minimum(y / z_safe, lim_y_pos), -lim_y_neg)
-    zero = torch.zeros_like(z)
-    jacobian = torch.stack([torch.stack([fx / z_safe, zero, -fx * tx / z_safe], -1),
-                            torch.stack([zero, fy / z_safe, -fy * ty / z_safe], -1)], -2)
-
-    # cov2d = T T^T with T = J R_wc R_q S: [N, 2, 3]; PSD by construction.
     rot_scale = quaternion_to_matrix(quats.to(f64)) * scales.to(f64)[:, None, :]  # [N, 3, 3]
-    t = jacobian @ (rotation @ rot_scale)  # [N, 2, 3]
-    t0, t1 = t[:, 0], t[:, 1]  # [N, 3]
+    n = rot_scale.shape[0]
+    world_axes = (rotation @ rot_scale.permute(1, 0, 2).reshape(3, n * 3)).reshape(3, n, 3)  # rows of R_wc R_q S
+    fx_z, fy_z = (fx / z_safe)[:, None], (fy / z_safe)[:, None]
+    t0 = fx_z * (world_axes[0] - tx[:, None] * world_axes[2])  # [N, 3]
+    t1 = fy_z * (world_axes[1] - ty[:, None] * world_axes[2])
     a = (t0 * t0).sum(-1) + low_pass
     b = (t0 * t1).sum(-1)
     c = (t1 * t1).sum(-1) + low_pass
@@ -108,15 +129,8 @@ def _project(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor,
         radii = torch.where(valid, radii, torch.zeros_like(radii)).to(torch.int32)
 
     keep = valid[:, None]
-    projection = Projection(
-        means2d=torch.where(keep, torch.stack([u, v], -1), 0.0).to(dtype),
-        cov2d=torch.where(keep, cov2d, 0.0).to(dtype),
-        conics=torch.where(keep, conics, 0.0).to(dtype),
-        depths=z.to(dtype),
-        radii=radii,
-        valid=valid,
-    )
-    return projection, boxes
+    return (torch.where(keep, torch.stack([u, v], -1), 0.0).to(dtype), torch.where(keep, cov2d, 0.0).to(dtype),
+            torch.where(keep, conics, 0.0).to(dtype), z.to(dtype), radii, valid, boxes)
 
 
 def footprint_boxes(means2d: Tensor, cov2d: Tensor, opacities: Tensor | None, width: int, height: int):

@@ -17,7 +17,7 @@ import torch
 from torch import Tensor
 
 from .binning import bin_gaussians
-from .composite import composite_tiles
+from .composite import EAGER_KERNELS, composite_tiles
 from .project import _check, _project
 
 __all__ = ["RenderOutput", "rasterize"]
@@ -63,22 +63,31 @@ def finish_render(color: Tensor, alpha: Tensor, depth_sum: Tensor, background: T
 
 def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
               world_to_cam: Tensor, K: Tensor, width: int, height: int, *, near: float = 0.01,
-              background: Tensor | None = None, low_pass: float = 0.3, tile_size: int = 4) -> RenderOutput:
+              background: Tensor | None = None, low_pass: float = 0.3, tile_size: int = 4,
+              compiled: bool = False) -> RenderOutput:
     """Render N Gaussians into one ``width`` x ``height`` view.
 
     means [N, 3] world; quats [N, 4] wxyz, any norm (zero = identity); scales [N, 3] standard
     deviations; opacities [N] in [0, 1]; colors [N, C] (any C); world_to_cam [4, 4]; K [3, 3];
     background [C] or None (= 0). ``tile_size`` only trades speed, never changes the result.
+    ``compiled=True`` runs the projection and the compositing through ``torch.compile`` kernels
+    (:mod:`.compiled`): faster after a one-off compile of tens of seconds (then cached by
+    inductor on disk), same results to float rounding.
     """
     check_render_inputs(means, quats, scales, opacities, colors, world_to_cam, K, width, height, near,
                         background, low_pass)
     width, height = int(width), int(height)
     projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
-                                 float(low_pass), opacities)
+                                 float(low_pass), opacities, compiled)
     bins = bin_gaussians(boxes, projection.valid, projection.depths, width, height, tile_size)
     channels = colors.shape[1]
     feats = torch.cat([colors, torch.ones_like(colors[:, :1]), projection.depths[:, None]], 1)  # [N, C + 2]
-    image = composite_tiles(bins, projection.means2d, projection.conics, opacities, feats, width, height)
+    kernels = EAGER_KERNELS
+    if compiled:
+        from .compiled import compiled_kernels  # torch.compile machinery only when asked for
+
+        kernels = compiled_kernels()
+    image = composite_tiles(bins, projection.means2d, projection.conics, opacities, feats, width, height, kernels)
     color, alpha, depth_sum = image[..., :channels], image[..., channels], image[..., channels + 1]
     color, depth = finish_render(color, alpha, depth_sum, background)
     return RenderOutput(color, alpha, depth, projection.means2d, projection.radii, projection.depths)

@@ -66,7 +66,7 @@ def reference_rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities:
     offset = pixels[None, :, :] - means2d[drawn][:, None, :]  # [V, P, 2]
     q = torch.einsum("vpi,vij,vpj->vp", offset, conics[drawn], offset)
     raw = opacities[drawn][:, None] * torch.exp(-0.5 * q.clamp_min(0.0))
-    alpha = torch.where((q >= 0) & (raw >= 1.0 / 255.0), raw.clamp_max(0.99), 0.0)  # [V, P]
+    alpha = torch.where(raw >= 1.0 / 255.0, raw.clamp_max(0.99), 0.0)  # [V, P]
     before = torch.cat([torch.ones_like(alpha[:1]), 1.0 - alpha[:-1]])
     weights = alpha * torch.cumprod(before, 0)  # [V, P]
     color = (weights[:, :, None] * colors[drawn][:, None, :]).sum(0).reshape(height, width, -1)

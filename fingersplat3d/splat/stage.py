@@ -7,7 +7,7 @@ report needs. Imports Open3D (through :mod:`.init`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Sequence
 
 import numpy as np
@@ -44,7 +44,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
                     config: SplatConfig, clean_config=None, *, device: torch.device | None = None,
                     progress: bool = False) -> SplatStage:
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks."""
-    from ..eval.image import masked_psnr
+    from ..eval.image import fraction_alpha_outside, masked_psnr
     from ..segment.voting import CleanConfig, clean_with_masks
 
     device = default_device() if device is None else torch.device(device)
@@ -54,33 +54,31 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     budget = gaussian_budget(train_views, config)
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
     fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, progress=progress)
-    started = time.perf_counter()
     masks = [view.mask for view in train_views]
     model = fit.gaussians
     outside_before = _alpha_outside(model, fit.cameras, masks, config)
+    started = time.perf_counter()
     cleaned, clean_stats = clean_with_masks(model, fit.cameras, masks, clean_config)
-    outside_after = _alpha_outside(cleaned, fit.cameras, masks, config)
     clean_seconds = time.perf_counter() - started
     refined = list(cameras)
     for k, v in enumerate(fitted_views):
         refined[v] = fit.cameras[k]
-    depths, psnrs = [], {}
+    depths, psnrs, outside_after = [], {}, []
     with torch.no_grad():
-        for view, camera in zip(views, refined):
+        for v, (view, camera) in enumerate(zip(views, refined)):
             out = render_camera(cleaned, camera, near_plane(cleaned.means, camera, config.near_fraction))
-            alpha = out.alpha.cpu().numpy()
-            depth = np.where((alpha > 0.5) & view.mask, out.depth.cpu().numpy(), np.nan).astype(np.float32)
-            depths.append(depth)
-            color = out.color.cpu().numpy()
+            alpha, color = out.alpha.cpu().numpy(), out.color.cpu().numpy()
+            depths.append(np.where((alpha > 0.5) & view.mask, out.depth.cpu().numpy(), np.nan).astype(np.float32))
             psnrs[view.name] = round(masked_psnr(color[..., 0] if color.shape[-1] == 1 else color, view.image, view.mask), 2)
+            if v in fitted_views:
+                outside_after.append(fraction_alpha_outside(alpha, view.mask))
     corrections = {views[v].name: round(_rotation_change_deg(cameras[v], refined[v]), 3) for v in fitted_views}
-    report = {"config": config.__dict__ | {}, "device": str(device), "budget": fit.budget,
+    report = {"config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
               "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
-              "densify": [d.__dict__ for d in fit.densify], "psnr_in_mask_db": psnrs,
-              "pose_correction_deg": corrections, "clean": clean_stats._asdict() if hasattr(clean_stats, "_asdict") else
-              dict(clean_stats.__dict__), "alpha_outside_mask": {"before": outside_before, "after": outside_after}}
+              "densify": [asdict(d) for d in fit.densify], "psnr_in_mask_db": psnrs,
+              "pose_correction_deg": corrections, "clean": asdict(clean_stats), "alpha_outside_mask": {"before": outside_before, "after": round(float(np.mean(outside_after)), 5)}}
     return SplatStage(cleaned.to("cpu"), refined, depths, report)
 
 

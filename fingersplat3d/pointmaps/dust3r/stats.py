@@ -1,8 +1,8 @@
 """Time and peak memory of network inference, for the report and the benchmark.
 
 CPU peak memory is the largest resident-set size seen while the work ran (sampled every 2 ms from
-``/proc/self/statm``) minus the size when it started: what inference added, not what the process
-held before. On CUDA it is ``torch.cuda.max_memory_allocated`` over the call.
+``/proc/self/statm``) minus the size when it started, after glibc has returned freed memory to the
+OS: what inference added, not what the process held before. On CUDA it is ``torch.cuda.max_memory_allocated`` over the call.
 """
 from __future__ import annotations
 
@@ -38,6 +38,16 @@ class InferenceStats:
     """(width, height) of the network input of the first image."""
 
 
+def _release_free_memory() -> None:
+    """Hand memory that was freed but kept by glibc's allocator back to the OS (so RSS tracks use)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def _rss_bytes() -> int:
     try:
         with open("/proc/self/statm") as handle:
@@ -62,6 +72,7 @@ class PeakMemory:
             torch.cuda.reset_peak_memory_stats(self.device)
             self._base = torch.cuda.memory_allocated(self.device)
         else:
+            _release_free_memory()
             self._base = self._peak = _rss_bytes()
             self._thread = threading.Thread(target=self._sample, daemon=True)
             self._thread.start()
