@@ -89,7 +89,7 @@ def test_zero_quaternion_is_the_identity():
     scene = base_scene()
     zero = dict(scene, quats=torch.zeros_like(scene["quats"]))
     identity = dict(scene, quats=torch.tensor([1.0, 0, 0, 0]).expand(len(scene["quats"]), 4).contiguous())
-    out_zero, leaves = render_and_check(zero)
+    out_zero, _ = render_and_check(zero)
     out_identity = rasterize(**identity, width=WIDTH, height=HEIGHT)
     torch.testing.assert_close(out_zero.color, out_identity.color)
 

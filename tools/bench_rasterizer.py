@@ -25,18 +25,18 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmachine import machine  # noqa: E402
+from benchmachine import machine
 
-from fingersplat3d.splat import matrix_to_quaternion, rasterize  # noqa: E402
-from fingersplat3d.splat.binning import bin_gaussians  # noqa: E402
-from fingersplat3d.splat.composite import _grid, _tile_centres, pair_alpha  # noqa: E402
-from fingersplat3d.splat.project import _project  # noqa: E402
+from fingersplat3d.splat import matrix_to_quaternion, rasterize
+from fingersplat3d.splat.binning import bin_gaussians
+from fingersplat3d.splat.composite import _grid, _tile_centres, pair_alpha
+from fingersplat3d.splat.project import _project
 
 WIDTH, HEIGHT = 640, 512
 FOCAL = 1320.0
 DISTANCE = 60.0  # mm, camera to cylinder axis
 RADIUS = 8.0  # mm
-LENGTH = 16.9  # mm along the axis: 2r x L projects onto ~40 % of the image
+LENGTH = 16.9  # mm along the axis: the finger covers ~45 % of the image
 
 
 def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int = 0):
@@ -62,7 +62,7 @@ def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int
 
 def count_pairs(scene, tile_size: int) -> tuple[int, int, float]:
     """(pairs with alpha >= 1/255, pairs the compositor evaluates, fraction of the image covered)."""
-    means, quats, scales, opacities, colors, world_to_cam, K = scene
+    means, quats, scales, opacities, _, world_to_cam, K = scene
     with torch.no_grad():
         proj, boxes = _project(means, quats, scales, world_to_cam, K, WIDTH, HEIGHT, 0.01, 0.3, opacities)
         bins = bin_gaussians(boxes, proj.valid, proj.depths, WIDTH, HEIGHT, tile_size)
@@ -112,10 +112,11 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     info = machine()
     start_load = tuple(round(x, 2) for x in info["load"])
-    lines = [f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
-             f"tile {args.tile_size}, load average at start {start_load}", "",
-             "| path | N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
-             "fwd Mpairs/s | bwd Mpairs/s | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    header = ("| path | N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
+              "fwd Mpairs/s | bwd Mpairs/s | load |")
+    lines = [(f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
+              f"tile {args.tile_size}, load average at start {start_load}"), "", header,
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print(lines[0], flush=True)
     cases = [(200_000, 1.0)]
     if not args.quick:
@@ -131,8 +132,8 @@ def main() -> None:
                    f"{pairs / bwd / 1e6:.0f} | {os.getloadavg()[0]:.1f} |")
             lines.append(row)
             print(row, flush=True)
-    lines += ["", "Times are medians over the repeats (best fwd+bwd in brackets); pairs/s = alpha >= 1/255 pairs "
-              "per second. The machine is shared: the load column is the 1-minute load average after each row."]
+    lines += ["", ("Times are medians over the repeats (best fwd+bwd in brackets); pairs/s = alpha >= 1/255 pairs "
+                   "per second. The machine is shared: the load column is the 1-minute load average after each row.")]
     if args.out:
         args.out.write_text("\n".join(lines) + "\n")
 

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-__all__ = ["TileGroup", "TileBins", "bin_gaussians"]
+__all__ = ["TileBins", "TileGroup", "bin_gaussians"]
 
 
 class TileGroup(NamedTuple):

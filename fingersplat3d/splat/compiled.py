@@ -4,9 +4,12 @@ Same contract and formulas as :func:`.composite.forward_group` / :func:`.composi
 written for fusion rather than for eager speed: the small products over feature channels and the
 pixel sums of the backward are explicit broadcast-and-sum expressions, which inductor fuses into
 the elementwise chains (eagerly they would materialise ``[G, L, S, F]`` tensors), and the pixel
-sums are taken directly instead of through moments. Only the two prefix sums stay ``aten.cumsum``
-(inductor's CPU backend has no scan). Off by default; the first call compiles (tens of seconds,
-then cached on disk by inductor), shapes are dynamic so tile groups of any size reuse the kernels.
+sums are taken directly instead of through moments. Only the prefix product (forward) and sum
+(backward) stay ATen calls (inductor's CPU backend has no scan). Off by default; the first call
+compiles (tens of seconds, then cached on disk by inductor); G and L are dynamic so tile groups of
+any size reuse the kernels. Measured on the 2-core machine (single thread, 200k-Gaussian finger
+scene, ~21M evaluated pairs): forward ~3.6 ns and backward ~6.6 ns per evaluated pair, against
+~14 and ~22 ns eagerly.
 """
 from __future__ import annotations
 

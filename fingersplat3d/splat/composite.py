@@ -15,22 +15,24 @@ Backward (per pixel, with G_i = feat_i . dL/df and R = sum_i w_i G_i = f . dL/df
     dL/dalpha_k = T_k G_k - (R - sum_{i <= k} w_i G_i) / (1 - alpha_k)
 
 so one more prefix sum, front to back; 1 - alpha >= 0.01 keeps the division safe. The pixel sums
-that the parameter gradients need (sum_s dq dx^2, ...) are formed from six pixel moments of dq per
-pair, i.e. one ``[G, L, S] @ [S, 6]`` product. Padding slots point at a sentinel Gaussian with
+that the parameter gradients need (sum_s dq dx^2, ...) are formed, on the eager path, from six pixel
+moments of dq per pair, i.e. one ``[G, L, S] @ [S, 6]`` product. Padding slots point at a sentinel Gaussian with
 opacity 0. The per-group kernels are plain functions of dense tensors so that
 :mod:`.compiled` can hand them to ``torch.compile``; the default path runs them eagerly.
 """
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import torch
 from torch import Tensor
+from torch.autograd.function import once_differentiable
 
 from .binning import TileBins
 from .project import ALPHA_MAX, ALPHA_MIN
 
-__all__ = ["composite_tiles", "forward_group", "backward_group", "GroupKernels", "EAGER_KERNELS"]
+__all__ = ["EAGER_KERNELS", "GroupKernels", "backward_group", "composite_tiles", "forward_group"]
 
 
 def pair_alpha(params: Tensor, grid: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
@@ -147,6 +149,7 @@ class _Composite(torch.autograd.Function):
         return image
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad_image: Tensor):
         bins, kernels, n = ctx.bins, ctx.kernels, ctx.num
         dtype, device = grad_image.dtype, grad_image.device

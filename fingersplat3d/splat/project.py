@@ -20,7 +20,7 @@ from torch import Tensor
 
 from .quaternion import quaternion_to_matrix
 
-__all__ = ["Projection", "project_gaussians", "footprint_boxes", "ALPHA_MIN", "ALPHA_MAX"]
+__all__ = ["ALPHA_MAX", "ALPHA_MIN", "Projection", "footprint_boxes", "project_gaussians"]
 
 ALPHA_MIN = 1.0 / 255.0
 """Gaussian-pixel pairs with a smaller alpha are skipped (3DGS)."""

@@ -76,6 +76,8 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
     """
     check_render_inputs(means, quats, scales, opacities, colors, world_to_cam, K, width, height, near,
                         background, low_pass)
+    if int(tile_size) != tile_size or tile_size < 1:
+        raise ValueError(f"tile_size must be a positive integer, got {tile_size}")
     width, height = int(width), int(height)
     projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
                                  float(low_pass), opacities, compiled)
