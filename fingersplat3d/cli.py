@@ -82,7 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="dust3r backend: DUSt3R checkpoint file, e.g. DUSt3R_ViTLarge_BaseDecoder_512_dpt.pth "
                            "(nothing is downloaded)")
     fuse.add_argument("--device", default="auto",
-                      help="dust3r backend: auto (CUDA when available, default), cpu, cuda or cuda:N")
+                      help="where the dust3r backend and the splat fit run: auto (CUDA when available, default), cpu, "
+                           "cuda or cuda:N")
     fuse.add_argument("--pair-batch", type=int, default=4, help="dust3r backend: image pairs per network batch (default 4)")
     fuse.add_argument("--matcher", default="minutiae", help="correspondence method between views: minutiae (default), sift, rootsift, akaze")
     hint = fuse.add_mutually_exclusive_group()
@@ -175,6 +176,7 @@ def _run_synth(args: argparse.Namespace) -> int:
 
 
 def _run_fuse(args: argparse.Namespace) -> int:
+    from .device import resolve_device
     from .io.datasets import load_any
     from .pipeline import FuseConfig, fuse, write_reconstruction
 
@@ -187,6 +189,7 @@ def _run_fuse(args: argparse.Namespace) -> int:
         raise InputError("--backend dust3r needs --checkpoint PATH (a DUSt3R .pth file; nothing is downloaded)")
     if args.backend != "dust3r" and args.checkpoint is not None:
         raise InputError(f"--checkpoint is only used by --backend dust3r (the {args.backend} backend has no weights)")
+    resolve_device(args.device)  # an unusable device is an error before any work
     captures = load_any(args.inputs)
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
@@ -198,11 +201,17 @@ def _run_fuse(args: argparse.Namespace) -> int:
     config = replace(config, splat=_splat_config(args))
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True)
+    if "splat" in result.report:
+        result.report["splat"]["preset"] = args.splat_preset
     write_reconstruction(result, args.output, overwrite=args.overwrite)
     alignment = result.report["alignment"]
     print(f"wrote {args.output}: {len(result.capture)} views, {result.report['points']} points, units {result.units}, "
           f"alignment residual {alignment['residual_px']:.2f} px{'' if alignment['ok'] else ' (ALIGNMENT FAILED)'}, "
           f"{time.perf_counter() - start:.1f} s")
+    if "splat" in result.report:
+        splat = result.report["splat"]
+        psnr = ", ".join(f"{name} {value:.1f}" for name, value in splat["psnr_in_mask_db"].items())
+        print(f"  {splat['gaussians']} Gaussians ({args.splat_preset}); PSNR in the finger mask (dB): {psnr}")
     return 0
 
 

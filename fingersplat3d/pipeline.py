@@ -20,6 +20,7 @@ import numpy as np
 from . import __version__
 from .align.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .align.icp import ICPConfig, refine_poses
+from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
@@ -38,7 +39,8 @@ class FuseConfig:
     checkpoint: str | None = None
     """Weights of a learned backend (``dust3r``: a DUSt3R .pth checkpoint); never downloaded."""
     device: str = "auto"
-    """Where a learned backend runs: ``auto`` (CUDA when available, else CPU), ``cpu``, ``cuda``, ``cuda:N``."""
+    """Where the learned backend and the splat fit run: ``auto`` (CUDA when available, else CPU), ``cpu``,
+    ``cuda``, ``cuda:N``."""
     pair_batch: int = 4
     """Image pairs a learned backend decodes at once."""
     matcher: str = "minutiae"
@@ -294,7 +296,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
         with step("splat"):
             splat = run_splat_stage(capture.views, cameras, aligned_views or [0], cloud, config.splat, config.clean,
-                                    progress=progress)
+                                    device=resolve_device(config.device), progress=progress)
         cameras = splat.cameras
         report["splat"] = splat.report
         bar.update()

@@ -15,10 +15,16 @@ __all__ = ["SplatConfig", "PRESETS", "preset", "DEFAULT_PRESET"]
 class SplatConfig:
     """Fitting of Gaussians to the input photos (SH degree 0, 0.8 L1 + 0.2 D-SSIM inside the finger)."""
 
-    iterations: int = 600
+    iterations: int = 300
     """Optimisation steps; each step renders one input view (views are visited in shuffled rounds)."""
     lambda_dssim: float = 0.2
     """Weight of ``1 - SSIM`` in the loss (the paper's 0.2; L1 gets ``1 - lambda_dssim``)."""
+    lambda_silhouette: float = 0.1
+    """Weight of the mean rendered opacity outside the finger mask (keeps Gaussians off the background,
+    so the mask cleaning has little to remove; 0 = photometric loss only)."""
+    polish_fraction: float = 0.2
+    """Steps after the mask cleaning, as a fraction of ``iterations`` (poses fixed, no densification):
+    they repair what removing and splitting boundary Gaussians changed inside the finger."""
     # --- model size -------------------------------------------------------------------------
     gaussians_per_cell: float = 1.0
     """Gaussian budget density: Gaussians per (quarter ridge period)^2 of finger area, summed over
@@ -37,10 +43,11 @@ class SplatConfig:
     """Initialise each Gaussian as a disc in the surface's tangent plane, this thick relative to its
     width (the scene is a skin surface); None = isotropic."""
     # --- learning rates (Adam, per parameter group) --------------------------------------------
-    lr_means: float = 4e-3
-    """Initial learning rate of the centres, times the scene extent (decays exponentially). 25x the
-    3DGS default: a fit of hundreds of steps, not 30k, from a cloud already on the surface."""
-    lr_means_final: float = 4e-5
+    lr_means: float = 1e-3
+    """Initial learning rate of the centres, times the scene extent (decays exponentially); 6x the
+    3DGS default for a fit of hundreds of steps, not 30k. 4e-3 fitted the photos ~1 dB better but
+    moved the surface off the true depth (tools/bench_splat.py, README)."""
+    lr_means_final: float = 1e-5
     """Final learning rate of the centres, times the scene extent."""
     lr_scales: float = 0.02
     """Learning rate of the log scales."""
@@ -83,6 +90,8 @@ class SplatConfig:
             raise ValueError("SplatConfig.iterations must be >= 0")
         if not 0.0 <= self.lambda_dssim <= 1.0:
             raise ValueError("SplatConfig.lambda_dssim must be in [0, 1]")
+        if not 0.0 <= self.polish_fraction <= 1.0:
+            raise ValueError("SplatConfig.polish_fraction must be in [0, 1]")
         if self.gaussians_per_cell <= 0 or self.min_gaussians < 1 or self.max_gaussians < self.min_gaussians:
             raise ValueError("SplatConfig: the Gaussian budget settings must be positive and min <= max")
 
@@ -90,11 +99,15 @@ class SplatConfig:
     def densify_until(self) -> int:
         return int(self.iterations * self.densify_until_fraction)
 
+    @property
+    def polish_iterations(self) -> int:
+        return int(self.iterations * self.polish_fraction)
+
 
 PRESETS: dict[str, SplatConfig] = {
-    "fast": SplatConfig(iterations=300, gaussians_per_cell=0.6, densify_every=100),
-    "balanced": SplatConfig(iterations=900),
-    "accurate": SplatConfig(iterations=2500, gaussians_per_cell=1.5, densify_every=150, densify_from=300),
+    "fast": SplatConfig(iterations=100, gaussians_per_cell=0.6, densify_from=50, densify_every=50),
+    "balanced": SplatConfig(iterations=300, gaussians_per_cell=1.0, densify_from=100, densify_every=100),
+    "accurate": SplatConfig(iterations=1000, gaussians_per_cell=1.5, densify_from=200, densify_every=100),
 }
 DEFAULT_PRESET = "balanced"
 

@@ -19,6 +19,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from ..device import resolve_device
 from ..scene import Camera, View
 from .config import SplatConfig
 from .gaussians import Gaussians
@@ -33,7 +34,7 @@ __all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camer
 
 def default_device() -> torch.device:
     """CUDA when present, else CPU."""
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return resolve_device("auto")
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +174,9 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
                         colors, pose, target.K, target.width, target.height, near=nears[v])
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
+        if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
+            outside = ~target.mask
+            loss = loss + config.lambda_silhouette * out.alpha[outside].sum() / outside.sum().clamp_min(1)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
@@ -195,7 +199,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
     return SplatFit(fitted, refined, losses, densify_records, len(initial), budget, time.perf_counter() - started)
 
 
-def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np.ndarray, *, iterations: int = 150,
+def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np.ndarray, *, iterations: int = 80,
                lr_rotation: float = 2e-3, lr_translation: float = 2e-3, lambda_dssim: float = 0.2,
                near_fraction: float = 0.01) -> Camera:
     """Refine one camera's pose so the frozen model's render matches ``image`` inside ``mask``.

@@ -7,7 +7,7 @@ report needs. Imports Open3D (through :mod:`.init`).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -60,6 +60,13 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     started = time.perf_counter()
     cleaned, clean_stats = clean_with_masks(model, fit.cameras, masks, clean_config)
     clean_seconds = time.perf_counter() - started
+    polish_seconds = 0.0
+    if config.polish_iterations > 0 and len(cleaned):
+        steps = config.polish_iterations
+        polish = replace(config, iterations=steps, polish_fraction=0.0, refine_poses=False, densify_from=steps + 1,
+                         lr_means=0.1 * config.lr_means, lr_means_final=0.1 * config.lr_means_final, seed=config.seed + 1)
+        polished = fit_gaussians(cleaned, train_views, fit.cameras, polish, budget=len(cleaned), device=device)
+        cleaned, polish_seconds = polished.gaussians, polished.seconds
     refined = list(cameras)
     for k, v in enumerate(fitted_views):
         refined[v] = fit.cameras[k]
@@ -76,6 +83,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     report = {"config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
               "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
+              "polish_seconds": round(polish_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
               "densify": [asdict(d) for d in fit.densify], "psnr_in_mask_db": psnrs,
               "pose_correction_deg": corrections, "clean": asdict(clean_stats), "alpha_outside_mask": {"before": outside_before, "after": round(float(np.mean(outside_after)), 5)}}

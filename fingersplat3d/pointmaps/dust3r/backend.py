@@ -25,6 +25,7 @@ from typing import ClassVar, Iterator, Sequence
 import numpy as np
 import torch
 
+from ...device import resolve_device
 from ...errors import InputError
 from ...scene import View
 from ..base import PairPointmaps, Pointmap, register_backend
@@ -37,21 +38,6 @@ from .stats import InferenceStats, PeakMemory
 __all__ = ["Dust3rBackend", "resolve_device"]
 
 _ENCODER_CACHE = 32  # encoded images kept per backend
-
-
-def resolve_device(device: str) -> torch.device:
-    """``auto`` -> CUDA when available, else CPU; ``cpu``, ``cuda``, ``cuda:N`` as given (checked)."""
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        resolved = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise InputError(f"unknown device {device!r}; use auto, cpu, cuda or cuda:N") from None
-    if resolved.type not in ("cpu", "cuda"):
-        raise InputError(f"unsupported device {device!r}; use auto, cpu, cuda or cuda:N")
-    if resolved.type == "cuda" and not torch.cuda.is_available():
-        raise InputError(f"device {device!r} was asked for but CUDA is not available here")
-    return resolved
 
 
 @dataclass(eq=False)
