@@ -296,7 +296,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
         with step("splat"):
             splat = run_splat_stage(capture.views, cameras, aligned_views or [0], cloud, config.splat, config.clean,
-                                    device=resolve_device(config.device), progress=progress)
+                                    depths=depths, device=resolve_device(config.device), progress=progress)
         cameras = splat.cameras
         report["splat"] = splat.report
         bar.update()

@@ -163,3 +163,22 @@ def test_rgb_model_has_three_channels_and_grayscale_mismatch_is_an_error():
         fit_gaussians(truth, gray_views, cameras, SplatConfig(iterations=1), device="cpu")
     with torch.no_grad():
         assert render_camera(truth, cameras[0], near=0.1).color.shape == (48, 64, 3)
+
+
+def test_depth_prior_pulls_the_surface_onto_the_geometry():
+    truth = _plane_scene(n_side=14)
+    cameras = _cameras(angles=(-10.0, 10.0))
+    views = _views(truth, cameras)
+    depths = []
+    for camera in cameras:
+        with torch.no_grad():
+            out = render_camera(truth, camera, near=0.1)
+        depths.append(np.where(out.alpha.numpy() > 0.5, out.depth.numpy(), np.nan))
+    shifted = truth.with_(means=truth.means + torch.tensor([0.0, 0.0, 0.3]))  # 0.3 units behind the truth
+    frozen = dict(refine_poses=False, densify_from=1000, lr_colors=0.0, lr_scales=0.0, lr_quats=0.0, lr_opacity=0.0,
+                  lr_means=0.02, lr_means_final=0.02, lambda_silhouette=0.0)
+    free = fit_gaussians(shifted, views, cameras, SplatConfig(iterations=30, lambda_depth=0.0, **frozen), device="cpu")
+    held = fit_gaussians(shifted, views, cameras, SplatConfig(iterations=30, lambda_depth=10.0, **frozen), device="cpu",
+                         depths=depths)
+    offset = lambda fit: float((fit.gaussians.means[:, 2] - truth.means[:, 2]).mean())  # noqa: E731
+    assert abs(offset(held)) < 0.5 * abs(offset(free)) and abs(offset(held)) < 0.15

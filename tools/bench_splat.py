@@ -196,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", default=[], help="override a SplatConfig field: NAME=VALUE (JSON)")
     parser.add_argument("--out", type=Path)
     parser.add_argument("--quick", action="store_true", help="one seed")
+    parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--bound", action="store_true",
                         help="instead: fit on exact geometry (GT cameras, cloud from GT depth), held-out at GT cameras")
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
@@ -206,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = run(args.worker[0], json.loads(args.worker[1]), overrides)
         print(json.dumps(rows, default=float))
         return 0
-    seeds = list(range(1 if args.quick else args.seeds))
+    seeds = list(range(args.first_seed, args.first_seed + (1 if args.quick else args.seeds)))
     results = {}
     with tempfile.TemporaryDirectory() as folder:
         captures = [str(p) for p in synth_captures(seeds, Path(folder))]

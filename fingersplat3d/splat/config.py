@@ -22,6 +22,9 @@ class SplatConfig:
     lambda_silhouette: float = 0.1
     """Weight of the mean rendered opacity outside the finger mask (keeps Gaussians off the background,
     so the mask cleaning has little to remove; 0 = photometric loss only)."""
+    lambda_depth: float = 10.0
+    """Weight of the rendered depth's relative L1 distance to the geometry stage's depth, inside the
+    mask (0 = free: the photos alone decide where the surface goes; measured worse, README)."""
     polish_fraction: float = 0.2
     """Steps after the mask cleaning, as a fraction of ``iterations`` (poses fixed, no densification):
     they repair what removing and splitting boundary Gaussians changed inside the finger."""

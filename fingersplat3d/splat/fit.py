@@ -47,14 +47,22 @@ class FitTarget:
     world_to_cam: torch.Tensor  # [4, 4]
     width: int
     height: int
+    depth: torch.Tensor | None = None  # [H, W] prior depth (NaN = none), relative to its median
+    depth_valid: torch.Tensor | None = None  # [H, W] bool: mask & finite prior depth
+    depth_scale: float = 1.0  # median of the prior depth
 
     @classmethod
-    def from_view(cls, view: View, camera: Camera, device: torch.device) -> "FitTarget":
+    def from_view(cls, view: View, camera: Camera, device: torch.device, depth: np.ndarray | None = None) -> "FitTarget":
         image = view.image if view.image.ndim == 3 else view.image[..., None]
         mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
         as_tensor = lambda a, dtype=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)  # noqa: E731
+        prior = valid = None
+        scale = 1.0
+        if depth is not None and (valid_np := mask & np.isfinite(depth) & (depth > 0)).any():
+            scale = float(np.median(depth[valid_np]))
+            prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
         return cls(as_tensor(image), as_tensor(mask, torch.bool), as_tensor(camera.K), as_tensor(camera.world_to_cam),
-                   view.width, view.height)
+                   view.width, view.height, prior, valid, scale)
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,8 +143,12 @@ def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: in
 
 def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[Camera],
                   config: SplatConfig = SplatConfig(), *, budget: int | None = None, device: torch.device | None = None,
-                  progress: bool = False) -> SplatFit:
-    """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger."""
+                  depths: Sequence[np.ndarray] | None = None, progress: bool = False) -> SplatFit:
+    """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger.
+
+    ``depths``: optional ``[H, W]`` prior depth per view (the geometry stage's, NaN = none); with
+    ``lambda_depth > 0`` the rendered depth is kept near it (relative L1 inside the mask).
+    """
     from tqdm import tqdm
 
     if len(views) != len(cameras) or not views:
@@ -144,7 +156,8 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
     device = default_device() if device is None else torch.device(device)
     started = time.perf_counter()
     model = initial.detach().to(device, torch.float32)
-    targets = [FitTarget.from_view(view, camera, device) for view, camera in zip(views, cameras)]
+    priors = depths if depths is not None and config.lambda_depth > 0 else [None] * len(views)
+    targets = [FitTarget.from_view(view, camera, device, prior) for view, camera, prior in zip(views, cameras, priors)]
     if model.channels != targets[0].image.shape[-1]:
         raise ValueError(f"the model has {model.channels} colour channel(s) but the images have {targets[0].image.shape[-1]}")
     budget = gaussian_budget(views, config) if budget is None else int(budget)
@@ -177,6 +190,9 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
             outside = ~target.mask
             loss = loss + config.lambda_silhouette * out.alpha[outside].sum() / outside.sum().clamp_min(1)
+        if target.depth is not None:  # stay near the aligned geometry: photos alone under-constrain depth
+            error = (out.depth - target.depth).abs()[target.depth_valid] / target.depth_scale
+            loss = loss + config.lambda_depth * error.mean()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()

@@ -41,8 +41,8 @@ def _initial_gaussians(cloud, channels: int, budget: int, config: SplatConfig, s
 
 
 def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_views: Sequence[int], cloud,
-                    config: SplatConfig, clean_config=None, *, device: torch.device | None = None,
-                    progress: bool = False) -> SplatStage:
+                    config: SplatConfig, clean_config=None, *, depths: Sequence[np.ndarray] | None = None,
+                    device: torch.device | None = None, progress: bool = False) -> SplatStage:
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from ..segment.voting import CleanConfig, clean_with_masks
@@ -53,7 +53,9 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     train_cameras = [cameras[v] for v in fitted_views]
     budget = gaussian_budget(train_views, config)
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
-    fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, progress=progress)
+    train_depths = [depths[v] for v in fitted_views] if depths is not None else None
+    fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, depths=train_depths,
+                        progress=progress)
     masks = [view.mask for view in train_views]
     model = fit.gaussians
     outside_before = _alpha_outside(model, fit.cameras, masks, config)
@@ -65,7 +67,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
         steps = config.polish_iterations
         polish = replace(config, iterations=steps, polish_fraction=0.0, refine_poses=False, densify_from=steps + 1,
                          lr_means=0.1 * config.lr_means, lr_means_final=0.1 * config.lr_means_final, seed=config.seed + 1)
-        polished = fit_gaussians(cleaned, train_views, fit.cameras, polish, budget=len(cleaned), device=device)
+        polished = fit_gaussians(cleaned, train_views, fit.cameras, polish, budget=len(cleaned), device=device,
+                                 depths=train_depths)
         cleaned, polish_seconds = polished.gaussians, polished.seconds
     refined = list(cameras)
     for k, v in enumerate(fitted_views):
