@@ -67,10 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
     synth.set_defaults(run=_run_synth)
 
     fuse = commands.add_parser(
-        "fuse", help="3D finger from 2-N uncalibrated photos: cameras, fused point cloud, depth maps, mesh",
+        "fuse", help="3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaussians, depth maps, mesh",
         description="Recover the cameras and one fused 3D finger surface from photos with no camera "
                     "parameters: per-view pointmaps, pairwise registration on ridge-texture correspondences, "
-                    "joint global alignment (poses, focal, depth), ICP refinement. Writes OUT/fused.ply, "
+                    "joint global alignment (poses, focal, depth), optional ICP, then a Gaussian-splat fit to the "
+                    "photos cleaned with the finger masks. Writes OUT/fused.ply, gaussians.ply (3DGS layout), "
                     "cameras.json, depth/<view>.npy (+ .png previews), report.json and, with --mesh, mesh.ply. "
                     "Without a metric hint the units are arbitrary (and say so).")
     fuse.add_argument("inputs", type=Path, nargs="+",
