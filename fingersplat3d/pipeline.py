@@ -23,6 +23,7 @@ from .align.icp import ICPConfig, refine_poses
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
+from .segment.voting import CleanConfig
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS"]
@@ -67,16 +68,10 @@ class FuseConfig:
     """Also build a triangle mesh (Poisson, cleaned with pymeshlab)."""
     splat: SplatConfig | None = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
     """Fit Gaussians to the photos on top of the fused cloud (None = geometry only, ``--no-splat``)."""
-    clean: "CleanConfig" = field(default_factory=lambda: _default_clean())
+    clean: CleanConfig = field(default_factory=CleanConfig)
     """Multi-view mask voting and boundary decomposition of the fitted Gaussians."""
     seed: int = 0
     """Seed of the random parts (RANSAC)."""
-
-
-def _default_clean():
-    from .segment.voting import CleanConfig
-
-    return CleanConfig()
 
 
 @dataclass(frozen=True, eq=False)

@@ -44,9 +44,8 @@ def test_budget_follows_finger_area_and_ridge_frequency():
     assert gaussian_budget([_striped_view(12.0)], replace(config, max_gaussians=50, min_gaussians=10)) == 50
 
 
-def _plane_scene(n_side=14, channels=1, seed=0):
+def _plane_scene(n_side=14, channels=1):
     """A textured square of Gaussians at z = 0 seen by cameras 10 units away."""
-    generator = torch.Generator().manual_seed(seed)
     u = torch.linspace(-1.0, 1.0, n_side)
     grid = torch.stack(torch.meshgrid(u, u, indexing="xy"), -1).reshape(-1, 2)
     n = len(grid)

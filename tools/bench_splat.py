@@ -54,9 +54,6 @@ def synth_captures(seeds: list[int], folder: Path) -> list[Path]:
 
 
 def run_preset(preset_name: str, captures: list[str], overrides: dict) -> list[dict]:
-    import numpy as np
-    import torch
-
     from fingersplat3d.eval import depth_errors
     from fingersplat3d.eval.image import masked_psnr, masked_ssim
     from fingersplat3d.pipeline import FuseConfig, fuse
@@ -66,7 +63,6 @@ def run_preset(preset_name: str, captures: list[str], overrides: dict) -> list[d
     from fingersplat3d.splat.fit import fit_camera
     from fingersplat3d.splat.novel import render_views
 
-    torch.set_num_threads(torch.get_num_threads())
     rows = []
     for path in captures:
         capture = pickle.loads(Path(path).read_bytes())

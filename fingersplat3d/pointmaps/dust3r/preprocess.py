@@ -14,7 +14,6 @@ Pixel centres are at integer coordinates (the project's convention).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
