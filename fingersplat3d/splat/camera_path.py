@@ -21,15 +21,18 @@ about the axis (through the pivot) to that angle; the ends are the input end cam
 All inputs must share the image size; ``K`` is interpolated the same way (all equal in practice).
 
 Degenerate input raises ``ValueError``: fewer than 2 cameras, cameras with the same orientation
-(no axis to turn about), or parallel optical axes (no pivot). Pure numpy.
+(no axis to turn about), or parallel optical axes (no pivot). numpy, with the quaternion conversions of
+:mod:`.quaternion`.
 """
 from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
 import numpy as np
+import torch
 
 from ..scene import Camera
+from .quaternion import matrix_to_quaternion, quaternion_to_matrix
 
 __all__ = ["RigGeometry", "rig_geometry", "arc_cameras", "cameras_at_angles"]
 
@@ -53,7 +56,7 @@ def rig_geometry(cameras: Sequence[Camera]) -> RigGeometry:
     cam_to_world = np.stack([camera.rotation.T for camera in cameras])  # [N, 3, 3]
     axis = _common_axis(cam_to_world)
     pivot = _optical_axes_intersection(cameras)
-    quats = np.stack([_matrix_to_quaternion(rotation) for rotation in cam_to_world])  # [N, 4]
+    quats = _matrix_to_quaternion(cam_to_world)  # [N, 4]
     relative = _quaternion_multiply(quats, _quaternion_conjugate(quats[0])[None])  # camera i relative to 0, world
     twist = 2.0 * np.arctan2(relative[:, 1:] @ axis, relative[:, 0])  # [N] in (-2pi, 2pi]
     angles = _unwrap_from_largest_gap(twist)
@@ -184,26 +187,12 @@ def _axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def _matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
-    """3x3 rotation -> unit wxyz quaternion with w >= 0 (Shepperd's method)."""
-    trace = np.trace(m)
-    candidates = np.array([
-        [1 + trace, m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]],
-        [m[2, 1] - m[1, 2], 1 + m[0, 0] - m[1, 1] - m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0]],
-        [m[0, 2] - m[2, 0], m[0, 1] + m[1, 0], 1 - m[0, 0] + m[1, 1] - m[2, 2], m[1, 2] + m[2, 1]],
-        [m[1, 0] - m[0, 1], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1], 1 - m[0, 0] - m[1, 1] + m[2, 2]],
-    ])
-    q = candidates[int(np.argmax(np.diag(candidates)))]
-    q = q / np.linalg.norm(q)
-    return -q if q[0] < 0 else q
+    """``[..., 3, 3]`` rotations -> unit wxyz quaternions with w >= 0."""
+    return matrix_to_quaternion(torch.from_numpy(np.asarray(m, np.float64))).numpy()
 
 
 def _quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return quaternion_to_matrix(torch.from_numpy(np.asarray(q, np.float64))).numpy()
 
 
 def _quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:

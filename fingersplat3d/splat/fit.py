@@ -22,7 +22,7 @@ import torch
 from ..device import resolve_device
 from ..scene import Camera, View
 from .config import SplatConfig
-from .gaussians import Gaussians
+from .gaussians import Gaussians, sh_to_rgb
 from .losses import photometric_loss
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
@@ -123,9 +123,14 @@ def render_camera(gaussians: Gaussians, camera: Camera, near: float, world_to_ca
     K = torch.as_tensor(camera.K, dtype=dtype, device=device)
     if world_to_cam is None:
         world_to_cam = torch.as_tensor(camera.world_to_cam, dtype=dtype, device=device)
-    colors = (0.5 + 0.28209479177387814 * gaussians.sh_dc).clamp_min(0.0)
-    return rasterize(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, colors,
-                     world_to_cam, K, camera.width, camera.height, near=near, background=background)
+    return _render(gaussians, world_to_cam, K, camera.width, camera.height, near, background)
+
+
+def _render(model: Gaussians, world_to_cam: torch.Tensor, K: torch.Tensor, width: int, height: int, near: float,
+            background: torch.Tensor | None = None) -> RenderOutput:
+    """Rasterize raw parameters: activated scales and opacities, SH DC colour clamped at 0 (as 3DGS)."""
+    return rasterize(model.means, model.quats, model.scales, model.opacities, sh_to_rgb(model.sh_dc).clamp_min(0.0),
+                     world_to_cam, K, width, height, near=near, background=background)
 
 
 def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: int, device) -> tuple:
@@ -182,9 +187,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         pose = target.world_to_cam
         if config.refine_poses and v != 0:
             pose = apply_pose_correction(pose, rotation[v], translation[v])
-        colors = (0.5 + 0.28209479177387814 * current.sh_dc).clamp_min(0.0)
-        out = rasterize(current.means, current.quats, torch.exp(current.log_scales), torch.sigmoid(current.opacity_logits),
-                        colors, pose, target.K, target.width, target.height, near=nears[v])
+        out = _render(current, pose, target.K, target.width, target.height, nears[v])
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background

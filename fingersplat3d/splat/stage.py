@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from ..eval.poses import rotation_angle_deg
 from ..scene import Camera, View
 from .config import SplatConfig
 from .fit import default_device, fit_gaussians, gaussian_budget, near_plane, render_camera
@@ -82,7 +83,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
             psnrs[view.name] = round(masked_psnr(color[..., 0] if color.shape[-1] == 1 else color, view.image, view.mask), 2)
             if v in fitted_views:
                 outside_after.append(fraction_alpha_outside(alpha, view.mask))
-    corrections = {views[v].name: round(_rotation_change_deg(cameras[v], refined[v]), 3) for v in fitted_views}
+    corrections = {views[v].name: round(float(rotation_angle_deg(refined[v].rotation, cameras[v].rotation)), 3) for v in fitted_views}
     report = {"config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
               "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
@@ -102,8 +103,3 @@ def _alpha_outside(model: Gaussians, cameras: Sequence[Camera], masks, config: S
             out = render_camera(model, camera, near_plane(model.means, camera, config.near_fraction))
             values.append(fraction_alpha_outside(out.alpha.cpu().numpy(), mask))
     return round(float(np.mean(values)), 5)
-
-
-def _rotation_change_deg(before: Camera, after: Camera) -> float:
-    relative = after.rotation @ before.rotation.T
-    return float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1.0, 1.0))))
