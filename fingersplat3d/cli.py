@@ -9,7 +9,9 @@ from dataclasses import replace
 from pathlib import Path
 
 from . import __version__
-from .errors import FS3DError, InputError
+from .align.global_opt import GlobalAlignConfig
+from .align.register import MATCHERS, RegistrationConfig
+from .errors import EXIT_INPUT, EXIT_NOT_REGISTERED, FS3DError, InputError
 from .splat.config import DEFAULT_PRESET, PRESETS, preset
 
 __all__ = ["main", "build_parser"]
@@ -30,8 +32,34 @@ def _angles(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"angles must be comma-separated degrees like -30,0,30, got {text!r}") from None
 
 
+def _number(kind, low: float, high: float = float("inf"), low_inclusive: bool = True):
+    """An argparse type: a ``kind`` (int or float) within ``[low, high]`` (``(low, high]`` when not ``low_inclusive``)."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, got {text!r}") from None
+        if not (value == value and (value >= low if low_inclusive else value > low) and value <= high):
+            bound = f"{'at least' if low_inclusive else 'more than'} {low:g}" + ("" if high == float("inf") else f" and at most {high:g}")
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {text}")
+        return value
+    return parse
+
+
+_COUNT = _number(int, 1)
+_STEPS = _number(int, 0, 1_000_000)
+_POSITIVE = _number(float, 0.0, 1e6, low_inclusive=False)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Argument errors as one sentence (``fs3d fuse: error: ...``), exit status 2; ``--help`` shows the usage."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fs3d",
         description="fingersplat3d: 3D fingerprints from 2-3 uncalibrated photos of a finger.",
         epilog="Run 'fs3d COMMAND --help' for the options of each command.",
@@ -51,11 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
                             "cfpose: one camera, finger rolled/pitched per shot, RGB 1024x1280; "
                             "ring: cameras at --angles (default: uwa)")
     synth.add_argument("--seed", type=int, default=0, help="random seed of the first finger (default 0)")
-    synth.add_argument("--count", type=int, default=1, help="number of fingers (seeds seed..seed+count-1)")
+    synth.add_argument("--count", type=_COUNT, default=1, help="number of fingers (seeds seed..seed+count-1)")
     synth.add_argument("--size", type=_size, help="image size WxH (default: the rig's)")
-    synth.add_argument("--focal", type=float, help="focal length in pixels (default: ~36 mm of finger across the long side)")
+    synth.add_argument("--focal", type=_POSITIVE, help="focal length in pixels (default: ~36 mm of finger across the long side)")
     synth.add_argument("--angles", type=_angles, help="ring rig: camera angles in degrees around the finger axis, written with = when the first is negative: --angles=-60,-20,20,60")
-    synth.add_argument("--poses", type=int, default=10, help="cfpose rig: number of shots (default 10)")
+    synth.add_argument("--poses", type=_COUNT, default=10, help="cfpose rig: number of shots (default 10)")
     synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
     colour = synth.add_mutually_exclusive_group()
     colour.add_argument("--rgb", dest="gray", action="store_false", default=None, help="colour images")
@@ -85,24 +113,29 @@ def build_parser() -> argparse.ArgumentParser:
     fuse.add_argument("--device", default="auto",
                       help="where the dust3r backend and the splat fit run: auto (CUDA when available, default), cpu, "
                            "cuda or cuda:N")
-    fuse.add_argument("--pair-batch", type=int, default=4, help="dust3r backend: image pairs per network batch (default 4)")
-    fuse.add_argument("--matcher", default="minutiae", help="correspondence method between views: minutiae (default), sift, rootsift, akaze")
+    fuse.add_argument("--pair-batch", type=_COUNT, default=4, help="dust3r backend: image pairs per network batch (default 4)")
+    fuse.add_argument("--matcher", default="surface", choices=MATCHERS,
+                      help="first correspondences between views: surface (default: ridge texture unwrapped on cylinder "
+                           "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
+    fuse.add_argument("--guided-rounds", type=_STEPS, default=RegistrationConfig.guided_rounds,
+                      help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds})")
     hint = fuse.add_mutually_exclusive_group()
-    hint.add_argument("--px-per-mm", type=float, help="metric hint: pixels per millimetre at the finger")
-    hint.add_argument("--finger-width-mm", type=float, help="metric hint: the finger's width in millimetres")
+    hint.add_argument("--px-per-mm", type=_POSITIVE, help="metric hint: pixels per millimetre at the finger")
+    hint.add_argument("--finger-width-mm", type=_POSITIVE, help="metric hint: the finger's width in millimetres")
     fuse.add_argument("--mesh", action="store_true", help="also write mesh.ply (Poisson, cleaned)")
     splat = fuse.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
     splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
     splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
                        help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
-    splat.add_argument("--splat-iterations", type=int, help="override the preset's optimisation steps")
-    splat.add_argument("--splat-budget-density", type=float, dest="splat_density",
+    splat.add_argument("--splat-iterations", type=_STEPS, help="override the preset's optimisation steps")
+    splat.add_argument("--splat-budget-density", type=_POSITIVE,
                        help="override the Gaussians per (ridge period/4)^2 of finger area")
     splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
     fuse.add_argument("--icp", action="store_true",
                       help="refine poses with Open3D ICP (guarded; off by default: on near-cylindrical fingers "
                            "it slides about the axis, see the README)")
-    fuse.add_argument("--iterations", type=int, help="global alignment Adam iterations (default 300)")
+    fuse.add_argument("--alignment-iterations", type=_STEPS, default=GlobalAlignConfig.polish_iterations,
+                      help=f"L-BFGS iterations of each global alignment round (default {GlobalAlignConfig.polish_iterations})")
     fuse.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     fuse.set_defaults(run=_run_fuse)
@@ -118,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
                                               "endings red, bifurcations blue), the mask and the depth map.")
     preview.add_argument("capture", type=Path, help="capture folder")
     preview.add_argument("-o", "--output", type=Path, help="PNG to write (default: CAPTURE/preview.png)")
-    preview.add_argument("--tile-width", type=int, default=480, help="width of each tile in pixels")
+    preview.add_argument("--tile-width", type=_number(int, 16, 8192), default=480, help="width of each tile in pixels")
     preview.set_defaults(run=_run_preview)
 
     render = commands.add_parser(
@@ -131,10 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "contact_sheet.png.")
     render.add_argument("reconstruction", type=Path, help="reconstruction folder (holds gaussians.ply and cameras.json)")
     render.add_argument("-o", "--output", type=Path, help="folder to write (default: RECONSTRUCTION/renders)")
-    render.add_argument("--count", type=int, default=12, help="views on the arc (default 12)")
+    render.add_argument("--count", type=_number(int, 1, 1000), default=12, help="views on the arc (default 12)")
     render.add_argument("--angles", type=_angles, help="render at these angles instead, written with = when the first "
                                                        "is negative: --angles=-22.5,22.5")
-    render.add_argument("--scale", type=float, default=1.0, help="image size relative to the input views (default 1)")
+    render.add_argument("--scale", type=_number(float, 0.01, 8.0), default=1.0, help="image size relative to the input views (default 1)")
     render.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     render.set_defaults(run=_run_render)
     return parser
@@ -146,8 +179,6 @@ def _run_synth(args: argparse.Namespace) -> int:
     from .io.capture import write_capture
     from .synth import Appearance, SynthConfig, synthesize
 
-    if args.count < 1:
-        raise InputError(f"--count must be at least 1, got {args.count}")
     appearance = Appearance()
     if args.no_noise:
         appearance = replace(appearance, noise=0.0, blur_px=0.0)
@@ -181,9 +212,6 @@ def _run_fuse(args: argparse.Namespace) -> int:
     from .io.datasets import load_any
     from .pipeline import FuseConfig, fuse, write_reconstruction
 
-    for value, name in ((args.px_per_mm, "--px-per-mm"), (args.finger_width_mm, "--finger-width-mm")):
-        if value is not None and not (value > 0 and value < 1e6):
-            raise InputError(f"{name} must be a positive number, got {value}")
     if args.output.exists() and not args.overwrite and (not args.output.is_dir() or any(args.output.iterdir())):
         raise InputError(f"{args.output}: already exists and is not empty (use --overwrite to replace it)")
     if args.backend == "dust3r" and args.checkpoint is None:
@@ -194,25 +222,32 @@ def _run_fuse(args: argparse.Namespace) -> int:
     captures = load_any(args.inputs)
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
+    registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
+                                      global_align=GlobalAlignConfig(polish_iterations=args.alignment_iterations))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
-                        device=args.device, pair_batch=args.pair_batch, matcher=args.matcher, icp=args.icp, px_per_mm=args.px_per_mm,
-                        finger_width_mm=args.finger_width_mm, mesh=args.mesh, seed=args.seed)
-    if args.iterations is not None:
-        config = replace(config, global_align=replace(config.global_align, iterations=args.iterations))
-    config = replace(config, splat=_splat_config(args))
+                        device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
+                        px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
+                        splat=_splat_config(args))
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True)
     if "splat" in result.report:
         result.report["splat"]["preset"] = args.splat_preset
     write_reconstruction(result, args.output, overwrite=args.overwrite)
     alignment = result.report["alignment"]
+    residual = "one view: nothing to align" if len(result.capture) == 1 else (
+        "identical images: monocular mode" if alignment["mode"] == "monocular" else f"alignment residual {alignment['residual_px']:.2f} px")
     print(f"wrote {args.output}: {len(result.capture)} views, {result.report['points']} points, units {result.units}, "
-          f"alignment residual {alignment['residual_px']:.2f} px{'' if alignment['ok'] else ' (ALIGNMENT FAILED)'}, "
-          f"{time.perf_counter() - start:.1f} s")
+          f"{residual}, {time.perf_counter() - start:.1f} s")
     if "splat" in result.report:
         splat = result.report["splat"]
         psnr = ", ".join(f"{name} {value:.1f}" for name, value in splat["psnr_in_mask_db"].items())
         print(f"  {splat['gaussians']} Gaussians ({args.splat_preset}); PSNR in the finger mask (dB): {psnr}")
+    if not result.registered:
+        missing = alignment.get("not_registered")
+        what = f"view(s) {', '.join(missing)} could not be registered" if missing else "the views were not registered reliably"
+        print(f"fs3d fuse: {what} ({alignment['reason']}); the outputs in {args.output} hold each such view "
+              "apart, with depth from its pointmap alone", file=sys.stderr)
+        return EXIT_NOT_REGISTERED
     return 0
 
 
@@ -220,11 +255,7 @@ def _splat_config(args: argparse.Namespace):
     """The splat settings from ``--splat-*`` (None with ``--no-splat``)."""
     if args.no_splat:
         return None
-    if args.splat_iterations is not None and args.splat_iterations < 0:
-        raise InputError(f"--splat-iterations must be >= 0, got {args.splat_iterations}")
-    if args.splat_density is not None and not args.splat_density > 0:
-        raise InputError(f"--splat-budget-density must be positive, got {args.splat_density}")
-    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_density,
+    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_budget_density,
                   refine_poses=False if args.no_pose_refinement else None)
 
 
@@ -296,10 +327,6 @@ def _run_render(args: argparse.Namespace) -> int:
         if not (folder / needed).is_file():
             hint = " (fuse it without --no-splat)" if needed == "gaussians.ply" else ""
             raise InputError(f"{folder / needed}: missing; 'fs3d render' needs a reconstruction folder from 'fs3d fuse'{hint}")
-    if args.count < 1 or args.count > 1000:
-        raise InputError(f"--count must be between 1 and 1000, got {args.count}")
-    if not 0.01 <= args.scale <= 8:
-        raise InputError(f"--scale must be between 0.01 and 8, got {args.scale}")
     output = args.output or folder / "renders"
     if output.exists() and not args.overwrite and (not output.is_dir() or any(output.iterdir())):
         raise InputError(f"{output}: already exists and is not empty (use --overwrite to replace it)")
@@ -324,12 +351,17 @@ def _run_render(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help and --version exit 0 as argparse does; argument errors return 2
+        if stop.code == EXIT_INPUT:
+            return EXIT_INPUT
+        raise
     try:
         return args.run(args)
     except (FS3DError, FileExistsError, FileNotFoundError) as error:
         print(f"fs3d {args.command}: error: {error}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
     except BrokenPipeError:  # output piped into head & co.
         sys.stderr.close()
         return 0

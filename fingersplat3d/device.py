@@ -1,11 +1,21 @@
-"""Which torch device a stage runs on: ``auto`` is CUDA when present, else the CPU."""
+"""Where work runs: the torch device (``auto`` is CUDA when present, else the CPU) and the CPU threads.
+
+:func:`cpu_threads` is the one setting for how many threads CPU work uses: the ``FS3D_THREADS``
+environment variable when set, else the cores this process may run on (its CPU affinity and, in a
+container or a Ray worker, its cgroup CPU quota), so that a process never starts more threads than
+it was given cores.
+"""
 from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
 
 import torch
 
 from .errors import InputError
 
-__all__ = ["resolve_device"]
+__all__ = ["resolve_device", "cpu_threads"]
 
 
 def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
@@ -21,3 +31,33 @@ def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
     if resolved.type == "cuda" and not torch.cuda.is_available():
         raise InputError(f"device {device!r} was asked for but CUDA is not available here")
     return resolved
+
+
+def _cgroup_quota() -> float | None:
+    """CPUs allowed by the cgroup v2 (``cpu.max``) or v1 (``cfs_quota_us / cfs_period_us``) quota, if any."""
+    try:
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()[:2]
+        return None if quota == "max" else int(quota) / int(period)
+    except (OSError, ValueError):
+        pass
+    try:
+        quota = int(Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us").read_text())
+        period = int(Path("/sys/fs/cgroup/cpu/cpu.cfs_period_us").read_text())
+        return quota / period if quota > 0 and period > 0 else None
+    except (OSError, ValueError):
+        return None
+
+
+def cpu_threads() -> int:
+    """Threads for CPU work (see the module docstring); at least 1."""
+    setting = os.environ.get("FS3D_THREADS", "").strip()
+    if setting:
+        try:
+            return max(1, int(setting))
+        except ValueError:
+            raise InputError(f"FS3D_THREADS must be a whole number of threads, got {setting!r}") from None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    quota = _cgroup_quota()
+    if quota is not None:
+        cores = min(cores, max(1, math.floor(quota)))
+    return max(1, cores)

@@ -2,12 +2,24 @@
 
 Every bad-input problem surfaces as an :class:`InputError` whose message is one sentence that
 names the file (when there is one) and the problem. The CLI prints that sentence and exits 2.
+
+Exit statuses of ``fs3d`` (documented in the README):
+
+* 0: done;
+* 2 (:data:`EXIT_INPUT`): bad input or arguments, one sentence on stderr, nothing written;
+* 3 (:data:`EXIT_NOT_REGISTERED`): ``fs3d fuse`` wrote its outputs but some views could not be
+  registered with the others (``report.json`` says which and why); not used when the images are
+  identical or there is one view (the paper's monocular mode);
+* 130: interrupted.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["FS3DError", "InputError", "input_error"]
+__all__ = ["FS3DError", "InputError", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED"]
+
+EXIT_INPUT = 2
+EXIT_NOT_REGISTERED = 3
 
 
 class FS3DError(Exception):

@@ -18,17 +18,19 @@ from typing import Iterator
 import numpy as np
 
 from . import __version__
-from .align.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .align.global_opt import GlobalAlignment, global_align
 from .align.icp import ICPConfig, refine_poses
+from .align.register import RegistrationConfig, register_views
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
 from .segment.voting import CleanConfig
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 
-__all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS"]
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
+MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 
 
 @dataclass(frozen=True)
@@ -44,12 +46,8 @@ class FuseConfig:
     ``cuda``, ``cuda:N``."""
     pair_batch: int = 4
     """Image pairs a learned backend decodes at once."""
-    matcher: str = "minutiae"
-    """Correspondence method between views (see :mod:`fingersplat3d.align.features`)."""
-    dense_matches: bool = True
-    """Grow guided grid matches around the minutiae matches (3-4x more correspondences)."""
-    global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
-    """Joint optimisation of poses, focal and depth."""
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    """Correspondences, pair similarities and the global alignment (:mod:`fingersplat3d.align.register`)."""
     icp: bool = False
     """Refine poses with Open3D ICP after the global alignment. Off by default: a finger is nearly a
     cylinder, and ICP slides about its axis: on exact geometry it moved views by 1-16 degrees
@@ -70,8 +68,6 @@ class FuseConfig:
     """Fit Gaussians to the photos on top of the fused cloud (None = geometry only, ``--no-splat``)."""
     clean: CleanConfig = field(default_factory=CleanConfig)
     """Multi-view mask voting and boundary decomposition of the fitted Gaussians."""
-    seed: int = 0
-    """Seed of the random parts (RANSAC)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +85,12 @@ class Reconstruction:
     mesh: object | None = None
     gaussians: object | None = None  # fingersplat3d.splat.Gaussians (cleaned), when the splat stage ran
     splat_depths: list[np.ndarray] | None = None  # [H, W] expected depth of the Gaussians per view
+
+    @property
+    def registered(self) -> bool:
+        """Whether every view was registered with the others (or there was nothing to register:
+        one view, or identical images, the paper's monocular mode)."""
+        return bool(self.report["alignment"]["ok"])
 
 
 class _Stages:
@@ -115,7 +117,7 @@ def _with_masks(capture: Capture) -> Capture:
 
     views = []
     for view in capture.views:
-        mask = view.mask if view.mask is not None else finger_mask(view.image, name=view.name)
+        mask = view.mask if view.mask is not None else finger_mask(view.image, name=f"view {view.name!r}")
         if mask.sum() < 16:
             raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
         views.append(view.with_(mask=mask))
@@ -133,51 +135,107 @@ def _backend(config: FuseConfig):
     return get_backend(config.backend)
 
 
-def _view_pairs(capture: Capture) -> list[tuple[int, int]]:
-    return [(a, b) for a in range(len(capture)) for b in range(a + 1, len(capture))]
+def _distinct_pairs(capture: Capture) -> list[tuple[int, int]]:
+    """View pairs ``a < b`` whose images differ (identical images have no parallax: the paper's monocular mode)."""
+    views = capture.views
+    return [(a, b) for a in range(len(views)) for b in range(a + 1, len(views))
+            if not (views[a].image.shape == views[b].image.shape and np.array_equal(views[a].image, views[b].image))]
 
 
-def _identical(view_a: View, view_b: View) -> bool:
-    return view_a.image.shape == view_b.image.shape and np.array_equal(view_a.image, view_b.image)
+def _pointmaps(capture: Capture, config: FuseConfig, report: dict):
+    """Own-frame pointmaps of every view and, from a pairwise backend, the pairs' pointmaps (else None)."""
+    backend = _backend(config)
+    pointmaps = backend.predict_views(capture.views)
+    for pointmap, view in zip(pointmaps, capture.views):
+        if not np.any(pointmap.valid & view.mask):
+            raise InputError(f"view {view.name!r}: the {config.backend} backend gave no finite 3D point on the finger")
+    pair_pointmaps = None
+    if hasattr(backend, "predict_pairs"):  # learned pairwise pointmaps replace image matching
+        pairs = _distinct_pairs(capture)
+        pair_pointmaps = {(p.i, p.j): p for p in backend.predict_pairs(capture.views, pairs)} if pairs else {}
+    if getattr(backend, "stats", None):
+        report["pointmap_inference"] = [asdict(record) for record in backend.stats]
+    return pointmaps, pair_pointmaps
 
 
-def _pairs(capture: Capture, pointmaps, config: FuseConfig, report: dict,
-           pair_pointmaps: dict | None = None) -> list[PairCorrespondences]:
-    """Pair relations: from the backend's pairwise pointmaps when it gives them, else image matching."""
-    from .align.features import match_views
-    from .align.pairwise import register_pair
+def _register(capture: Capture, pointmaps, pair_pointmaps, config: FuseConfig, report: dict, say) -> GlobalAlignment:
+    """Pair relations and the global alignment: image correspondences, or the backend's pairwise pointmaps."""
+    pairs = _distinct_pairs(capture)
+    identical = [{"a": capture.views[a].name, "b": capture.views[b].name, "ok": False,
+                  "reason": "identical images: no parallax (monocular mode)"}
+                 for a in range(len(capture)) for b in range(a + 1, len(capture)) if (a, b) not in pairs]
+    if pair_pointmaps is None:
+        registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say)
+        report["pairs"] = registration.pairs + identical
+        report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds}
+        return registration.alignment
     from .align.pointmap_pairs import register_pointmap_pair
 
-    rng = np.random.default_rng(config.seed)
-    pairs, records = [], []
+    rng = np.random.default_rng(config.registration.seed)
+    registered, records = [], []
     views = capture.views
-    for a, b in _view_pairs(capture):
-        record = {"a": views[a].name, "b": views[b].name}
-        if _identical(views[a], views[b]):
-            record.update(ok=False, reason="identical images: no parallax (monocular mode)")
-            records.append(record)
-            continue
-        if pair_pointmaps is not None:
-            registration = register_pointmap_pair(pointmaps[a], pointmaps[b], pair_pointmaps[(a, b)],
-                                                  pair_pointmaps.get((b, a)), mask_a=views[a].mask,
-                                                  mask_b=views[b].mask, rng=rng)
-            record.update(method="pointmaps", correspondences=registration.n_correspondences,
-                          residual=float(registration.residual), ok=registration.ok, reason=registration.reason)
-            records.append(record)
-            if registration.ok:
-                pairs.append(registration.correspondences)
-            continue
-        matches = match_views(views[a].image, views[a].mask, views[b].image, views[b].mask, method=config.matcher,
-                              densify=config.dense_matches and config.matcher == "minutiae")
-        registration = register_pair(pointmaps[a], pointmaps[b], matches, rng=rng)
-        record.update(matches=int(len(matches.uv_a)), inliers=int(registration.n_inliers),
-                      residual=float(registration.residual), ok=bool(registration.ok), reason=registration.reason)
-        records.append(record)
-        if registration.ok:
-            pairs.append(PairCorrespondences(a, b, registration.uv_a, registration.uv_b, registration.weight,
-                                             registration.b_to_a.as_matrix()))
-    report["pairs"] = records
-    return pairs
+    for a, b in pairs:
+        result = register_pointmap_pair(pointmaps[a], pointmaps[b], pair_pointmaps[(a, b)], pair_pointmaps.get((b, a)),
+                                        mask_a=views[a].mask, mask_b=views[b].mask, rng=rng)
+        records.append({"a": views[a].name, "b": views[b].name, "method": "pointmaps", "ok": result.ok,
+                        "reason": result.reason, "correspondences": result.n_correspondences,
+                        "residual": float(result.residual)})
+        if result.ok:
+            registered.append(result.correspondences)
+    report["pairs"] = records + identical
+    return global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registered,
+                        config.registration.global_align)
+
+
+def _alignment_status(capture: Capture, alignment: GlobalAlignment, report: dict) -> dict:
+    """Whether the views were registered; said on stderr and in the report when they were not."""
+    names = capture.names
+    missing = [names[v] for v in range(len(capture)) if not alignment.aligned[v]]
+    monocular = len(capture) == 1 or not _distinct_pairs(capture)
+    status = {"ok": True, "mode": "monocular" if monocular else "multi-view"}
+    if monocular:
+        return status
+    if missing:
+        reasons = "; ".join(f"{p['a']}-{p['b']}: {p['reason']}" for p in report.get("pairs", []) if not p["ok"] and p["reason"])
+        status.update(ok=False, not_registered=missing, reason=reasons)
+        _warn(report, f"view(s) {', '.join(missing)} could not be registered with the others ({reasons}); "
+                      "their depth comes from the pointmap alone and they are left out of the fused cloud")
+    elif np.isfinite(alignment.residual_px) and alignment.residual_px > MAX_RESIDUAL_PX:
+        status.update(ok=False, reason=f"global alignment residual {alignment.residual_px:.1f} px")
+        _warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than {MAX_RESIDUAL_PX:g} px): "
+                      "the cameras are probably wrong")
+    return status
+
+
+def _refine_with_icp(capture: Capture, cameras: list[Camera], clouds: list, aligned: list[int], root: int,
+                     config: FuseConfig, report: dict) -> None:
+    """Open3D ICP on the aligned views' clouds (guarded); updates ``cameras`` and ``clouds`` in place."""
+    icp = refine_poses([clouds[v] for v in aligned], config.icp_config, fixed=aligned.index(root))
+    for k, v in enumerate(aligned):
+        if icp.accepted[k]:
+            cam_to_world = icp.corrections[k] @ cameras[v].cam_to_world
+            cameras[v] = Camera(cameras[v].K, np.linalg.inv(cam_to_world), cameras[v].width, cameras[v].height)
+            clouds[v].transform(icp.corrections[k])
+    report["icp"] = {capture.views[v].name: {"accepted": icp.accepted[k], "fitness": icp.fitness[k],
+                                             "rmse": icp.rmse[k], "note": icp.notes[k]} for k, v in enumerate(aligned)}
+
+
+def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel: float):
+    """One Open3D cloud of the aligned views: voxel-thinned, outliers removed, normals facing the cameras."""
+    import open3d as o3d
+
+    cloud = o3d.geometry.PointCloud()
+    for v in aligned:
+        cloud += clouds[v]
+    if len(cloud.points) < 10:
+        raise InputError("the fused point cloud is empty: no view produced usable depth")
+    extent = float(np.linalg.norm(cloud.get_max_bound() - cloud.get_min_bound()))
+    if voxel > 0 and extent > 0:
+        cloud = cloud.voxel_down_sample(voxel * extent)
+    cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=3.0)
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
+    _orient_outward(cloud, cameras, aligned)
+    return cloud
 
 
 def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.ndarray, min_confidence: float):
@@ -186,7 +244,7 @@ def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.n
     valid = np.isfinite(depth) & (confidence >= min_confidence) & view.mask
     pixels = np.argwhere(valid)[:, ::-1].astype(np.float64)
     points = camera.unproject(pixels, depth[valid])
-    return points_to_cloud(points, view.image[valid]), valid
+    return points_to_cloud(points, view.image[valid])
 
 
 def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict) -> float | None:
@@ -207,130 +265,82 @@ def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.nda
 
 def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = False) -> Reconstruction:
     """Recover cameras and one fused finger surface from the capture's images (cameras ignored), and
-    fit Gaussians to the photos on top (``config.splat``)."""
+    fit Gaussians to the photos on top (``config.splat``).
+
+    Views that could not be registered do not raise: the result says so
+    (:attr:`Reconstruction.registered`, ``report["alignment"]``), so that outputs can still be written.
+    """
     config = FuseConfig() if config is None else config
     from tqdm import tqdm
-
-    import open3d as o3d
 
     if len(capture) < MIN_VIEWS:
         raise InputError("fs3d fuse needs at least one image")
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}
-    bar = tqdm(total=6 + (config.splat is not None), desc="fs3d fuse", unit="stage", disable=not progress)
+    bar = tqdm(total=5 + (config.splat is not None), desc="fs3d fuse", unit="stage", disable=not progress)
 
     def step(name):
         bar.set_postfix_str(name)
         return stages(name)
 
-    with step("masks"):
-        capture = _with_masks(capture)
-    bar.update()
-    with step("pointmaps"):
-        backend = _backend(config)
-        pointmaps = backend.predict_views(capture.views)
-        pair_pointmaps = None
-        if hasattr(backend, "predict_pairs"):  # learned pairwise pointmaps replace image matching
-            distinct = [(a, b) for a, b in _view_pairs(capture) if not _identical(capture.views[a], capture.views[b])]
-            pair_pointmaps = {(p.i, p.j): p for p in backend.predict_pairs(capture.views, distinct)} if distinct else {}
-        if getattr(backend, "stats", None):
-            report["pointmap_inference"] = [asdict(record) for record in backend.stats]
-    bar.update()
-    with step("pairwise"):
-        pairs = _pairs(capture, pointmaps, config, report, pair_pointmaps)
-    bar.update()
-    with step("global_alignment"):
-        alignment = global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], pairs,
-                                 config.global_align)
-    bar.update()
-    _check_alignment(capture, alignment, pairs, report)
-    cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])
-               for v, view in enumerate(capture.views)]
-    depths = [np.where(view.mask, alignment.depths[v], np.nan).astype(np.float32) for v, view in enumerate(capture.views)]
-    confidences = [pm.confidence for pm in pointmaps]
-    with step("icp"):
-        clouds = [_world_cloud(view, cameras[v], depths[v], confidences[v], config.min_confidence)[0]
-                  for v, view in enumerate(capture.views)]
-        aligned_views = [v for v in range(len(capture)) if alignment.aligned[v]]
-        if config.icp and len(aligned_views) >= 2:
-            root = alignment.tree[0][0] if alignment.tree else aligned_views[0]
-            icp = refine_poses([clouds[v] for v in aligned_views], config.icp_config, fixed=aligned_views.index(root))
-            for k, v in enumerate(aligned_views):
-                if icp.accepted[k]:
-                    cam_to_world = icp.corrections[k] @ cameras[v].cam_to_world
-                    cameras[v] = Camera(cameras[v].K, np.linalg.inv(cam_to_world), cameras[v].width, cameras[v].height)
-                    clouds[v].transform(icp.corrections[k])
-            report["icp"] = {capture.views[v].name: {"accepted": icp.accepted[k], "fitness": icp.fitness[k],
-                                                     "rmse": icp.rmse[k], "note": icp.notes[k]}
-                             for k, v in enumerate(aligned_views)}
-    bar.update()
-    with step("fusion"):
-        cloud = o3d.geometry.PointCloud()
-        for v in aligned_views or [0]:
-            cloud += clouds[v]
-        extent = float(np.linalg.norm(cloud.get_max_bound() - cloud.get_min_bound())) if len(cloud.points) else 0.0
-        if config.voxel > 0 and extent > 0:
-            cloud = cloud.voxel_down_sample(config.voxel * extent)
-        if len(cloud.points) < 10:
-            raise InputError("the fused point cloud is empty: no view produced usable depth")
-        cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=3.0)
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
-        _orient_outward(cloud, cameras, aligned_views or [0])
-        scale = _metric_scale(config, cameras, depths, cloud, report)
-        units = "arbitrary"
-        if scale is not None:
-            units = "mm"
-            cloud.scale(scale, center=np.zeros(3))
-            depths = [d * scale for d in depths]
-            cameras = [_scaled_camera(c, scale) for c in cameras]
-    bar.update()
-    splat = None
-    if config.splat is not None:
-        from .splat.stage import run_splat_stage
-
-        with step("splat"):
-            splat = run_splat_stage(capture.views, cameras, aligned_views or [0], cloud, config.splat, config.clean,
-                                    depths=depths, device=resolve_device(config.device), progress=progress)
-        cameras = splat.cameras
-        report["splat"] = splat.report
+    try:
+        with step("masks"):
+            capture = _with_masks(capture)
         bar.update()
-    mesh = None
-    if config.mesh:
-        from .mesh import mesh_from_cloud
+        with step("pointmaps"):
+            pointmaps, pair_pointmaps = _pointmaps(capture, config, report)
+        bar.update()
+        with step("registration"):
+            alignment = _register(capture, pointmaps, pair_pointmaps, config, report,
+                                  lambda text: bar.set_postfix_str(f"registration: {text}"))
+        bar.update()
+        report["alignment"] = _alignment_status(capture, alignment, report)
+        cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])
+                   for v, view in enumerate(capture.views)]
+        depths = [np.where(view.mask, alignment.depths[v], np.nan).astype(np.float32) for v, view in enumerate(capture.views)]
+        confidences = [pm.confidence for pm in pointmaps]
+        aligned = [v for v in range(len(capture)) if alignment.aligned[v]] or [alignment.root]
+        with step("icp"):
+            clouds = [_world_cloud(view, cameras[v], depths[v], confidences[v], config.min_confidence)
+                      for v, view in enumerate(capture.views)]
+            if config.icp and len(aligned) >= 2:
+                _refine_with_icp(capture, cameras, clouds, aligned, alignment.root, config, report)
+        bar.update()
+        with step("fusion"):
+            cloud = _fused_cloud(clouds, cameras, aligned, config.voxel)
+            scale = _metric_scale(config, cameras, depths, cloud, report)
+            units = "mm" if scale is not None else "arbitrary"
+            if scale is not None:
+                cloud.scale(scale, center=np.zeros(3))
+                depths = [d * scale for d in depths]
+                cameras = [_scaled_camera(c, scale) for c in cameras]
+        bar.update()
+        splat = None
+        if config.splat is not None:
+            from .splat.stage import run_splat_stage
 
-        with stages("mesh"):
-            mesh = mesh_from_cloud(cloud)
-    bar.close()
-    report.update(stages=stages.records, units=units, scale_mm_per_unit=scale,
-                  alignment={"residual_px": alignment.residual_px, "residual_rel3d": alignment.residual_rel3d,
-                             "focals_px": alignment.focals, "relief_scale": alignment.relief_scale,
-                             "spanning_tree": [[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
-                             "aligned": dict(zip(capture.names, alignment.aligned)), **report.get("alignment", {})},
-                  points=len(cloud.points))
+            with step("splat"):
+                splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean,
+                                        depths=depths, device=resolve_device(config.device), progress=progress)
+            cameras = splat.cameras
+            report["splat"] = splat.report
+            bar.update()
+        mesh = None
+        if config.mesh:
+            from .mesh import mesh_from_cloud
+
+            with stages("mesh"):
+                mesh = mesh_from_cloud(cloud)
+    finally:
+        bar.close()  # before any message: an error is the last line the user sees
+    report["alignment"].update(
+        residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d, focals_px=alignment.focals,
+        relief_scale=alignment.relief_scale, spanning_tree=[[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
+        aligned=dict(zip(capture.names, alignment.aligned)))
+    report.update(stages=stages.records, units=units, scale_mm_per_unit=scale, points=len(cloud.points))
     return Reconstruction(capture, cameras, depths, confidences, cloud, units, scale, report, mesh,
                           splat.gaussians if splat else None, splat.depths if splat else None)
-
-
-def _check_alignment(capture: Capture, alignment: GlobalAlignment, pairs, report: dict) -> None:
-    """Say so (report + stderr) when views could not be aligned or the fit is poor."""
-    status = {"ok": True}
-    missing = [capture.views[v].name for v in range(len(capture)) if not alignment.aligned[v]]
-    if len(capture) > 1 and missing:
-        status["ok"] = False
-        _warn(report, f"alignment failed for view(s) {', '.join(missing)}: no reliable correspondences with the "
-                      "others; their depth comes from the pointmap alone and they are left out of the fused cloud")
-    if len(capture) > 1 and not pairs:
-        status["mode"] = "monocular"
-        _warn(report, "no pair of views could be registered: each view's depth comes from its own pointmap "
-                      "(monocular mode)")
-    elif len(capture) == 1:
-        status["mode"] = "monocular"
-    if pairs and np.isfinite(alignment.residual_px) and alignment.residual_px > 3.0:
-        status["ok"] = False
-        _warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than 3 px): the cameras "
-                      "are probably wrong")
-    report["alignment"] = status
 
 
 def _orient_outward(cloud, cameras: list[Camera], views: list[int]) -> None:

@@ -248,15 +248,18 @@ def test_uwa_nothing_matches(tmp_path):
     raises_naming(tmp_path.name, load_uwa, tmp_path)
 
 
-def test_uwa_frames_of_different_sizes(tmp_path):
+def test_uwa_frames_of_different_sizes_and_orientations_load(tmp_path):
+    # Real datasets store a camera portrait now and then (UWA 1_1_4_1_0.jpg): the views keep their own sizes.
     for frame in range(3):
-        cv2.imwrite(str(tmp_path / f"1_1_1_{frame}.jpg"), np.zeros((H, W + (frame == 2)), np.uint8))
-    raises_naming("1_1_1_2.jpg", load_uwa, tmp_path)
+        shape = (W, H) if frame == 0 else (H, W)
+        cv2.imwrite(str(tmp_path / f"1_1_1_{frame}.jpg"), np.zeros(shape, np.uint8))
+    (capture,) = load_uwa(tmp_path)
+    assert [v.image.shape for v in capture.views] == [(W, H), (H, W), (H, W)]
 
 
-def test_image_folder_odd_size_and_too_few(tmp_path):
-    for name, width in (("a", W), ("b", W), ("c", W + 2)):
-        cv2.imwrite(str(tmp_path / f"{name}.png"), np.zeros((H, width), np.uint8))
+def test_mixed_gray_and_colour_views_and_too_few(tmp_path):
+    for name, channels in (("a", 1), ("b", 1), ("c", 3)):
+        cv2.imwrite(str(tmp_path / f"{name}.png"), np.zeros((H, W, channels), np.uint8) + np.arange(channels, dtype=np.uint8))
     assert "c.png" in raises_naming("c.png", load_image_folder, tmp_path)
     (tmp_path / "c.png").unlink()
     raises_naming(tmp_path.name, load_image_folder, tmp_path, min_views=3)

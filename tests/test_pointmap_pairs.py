@@ -128,7 +128,7 @@ def test_global_alignment_from_pairwise_pointmaps_recovers_the_cameras(capture):
                                         mask_a=views[a].mask, mask_b=views[b].mask, rng=a + b)
         pairs.append(result.correspondences)
     alignment = global_align([p.depth for p in own], [p.focal for p in own], pairs,
-                             GlobalAlignConfig(iterations=40, polish_iterations=0))
+                             GlobalAlignConfig(polish_iterations=60, polish_rounds=1))
     assert all(alignment.aligned)
     errors = relative_rotation_errors(alignment.world_to_cam, [v.camera.world_to_cam for v in views])
     assert max(errors) < 1.0  # degrees

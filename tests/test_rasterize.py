@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from fingersplat3d.splat import Gaussians, project_gaussians, rasterize, reference_rasterize
-from fingersplat3d.splat.quaternion import covariance_3d
+from fingersplat3d.splat.gaussians import covariance_3d
 
 F64 = torch.float64
 

@@ -8,7 +8,8 @@ import torch
 
 from fingersplat3d.errors import InputError
 from fingersplat3d.splat.init import gaussians_from_cloud, knn_mean_distance
-from fingersplat3d.splat.quaternion import covariance_3d, quaternion_to_matrix
+from fingersplat3d.rotations import quaternion_to_matrix
+from fingersplat3d.splat.gaussians import covariance_3d
 
 
 def grid_cloud(spacing: float = 0.5, size: int = 12, normals: bool = True, colours: bool = True,

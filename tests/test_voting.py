@@ -18,7 +18,7 @@ from fingersplat3d.segment.voting import (
     vote_labels,
 )
 from fingersplat3d.splat.gaussians import Gaussians, rgb_to_sh
-from fingersplat3d.splat.quaternion import covariance_3d
+from fingersplat3d.splat.gaussians import covariance_3d
 from fingersplat3d.synth.rigs import rotation_about
 
 FOCAL, WIDTH, HEIGHT, DISTANCE = 400.0, 64, 48, 100.0  # 4 px per unit at the target

@@ -49,8 +49,10 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from .epipolar import fundamental_inliers, sampson_distance
+from .texture import as_gray, estimate_ridge_period, ridge_texture
 
-__all__ = ["Matches", "match_views", "estimate_ridge_period", "METHODS", "DEFAULT_METHOD"]
+__all__ = ["Matches", "match_views", "METHODS", "DEFAULT_METHOD"]
 
 METHODS = ("minutiae", "sift", "rootsift", "akaze")
 DEFAULT_METHOD = "minutiae"
@@ -103,28 +105,8 @@ class Matches:
 # Preprocessing
 # ------------------------------------------------------------------------------------------------
 
-def _gray(image: np.ndarray, name: str) -> np.ndarray:
-    """``[H, W]`` or ``[H, W, 3]`` in [0, 1] (or uint8/uint16) -> float32 ``[H, W]`` in [0, 1]."""
-    array = np.asarray(image)
-    if array.ndim == 3 and array.shape[2] == 1:
-        array = array[..., 0]
-    if array.ndim not in (2, 3) or (array.ndim == 3 and array.shape[2] != 3):
-        raise InputError(f"{name} must be HxW or HxWx3, got shape {array.shape}")
-    if array.dtype == np.uint8:
-        array = array.astype(np.float32) / 255.0
-    elif array.dtype == np.uint16:
-        array = array.astype(np.float32) / 65535.0
-    else:
-        array = array.astype(np.float32)
-    if not np.all(np.isfinite(array)):
-        raise InputError(f"{name} contains NaN or Inf")
-    if array.ndim == 3:  # luminance
-        array = array @ np.array([0.299, 0.587, 0.114], np.float32)
-    return array
-
-
 def _validate(image, mask, name: str) -> tuple[np.ndarray, np.ndarray]:
-    gray = _gray(image, f"image {name}")
+    gray = as_gray(image, f"image {name}")
     if mask is None:
         mask = np.ones(gray.shape, bool)
     mask = np.asarray(mask)
@@ -140,59 +122,6 @@ def _erode(mask: np.ndarray, radius: float) -> np.ndarray:
     radius = max(1, int(round(radius)))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     return cv2.erode(mask.astype(np.uint8), kernel) > 0
-
-
-def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_period: float = 3.0,
-                          max_period: float = 40.0) -> float:
-    """Dominant ridge period in pixels: peak of the radially averaged power spectrum.
-
-    Measured on a square around the mask's median point (shading removed by a high-pass, off-finger
-    pixels zeroed, Hann window); orientation-free, so curved ridges still give their spacing.
-    Returns ``TARGET_PERIOD_PX`` when no peak stands out (featureless image).
-    """
-    gray = _gray(gray, "image")
-    mask = np.ones(gray.shape, bool) if mask is None else np.asarray(mask, bool)
-    inner = _erode(mask, 0.02 * min(gray.shape)) if mask.sum() > 1000 else mask
-    rows, cols = np.nonzero(inner)
-    if len(rows) == 0:
-        return TARGET_PERIOD_PX
-    centre_r, centre_c = int(np.median(rows)), int(np.median(cols))
-    half = int(min(np.ptp(rows), np.ptp(cols)) * 0.35)
-    half = max(8, min(half, 256))
-    top, left = max(0, centre_r - half), max(0, centre_c - half)
-    high_pass = (gray - cv2.GaussianBlur(gray, (0, 0), max_period / 3.0)) * inner
-    patch = high_pass[top:top + 2 * half, left:left + 2 * half].astype(np.float64)
-    if min(patch.shape) < 16:
-        return TARGET_PERIOD_PX
-    window = np.outer(np.hanning(patch.shape[0]), np.hanning(patch.shape[1]))
-    size = 2 * max(patch.shape)
-    power = np.abs(np.fft.fftshift(np.fft.fft2(patch * window, (size, size)))) ** 2
-    yy, xx = np.indices(power.shape)
-    radius = np.hypot(yy - size // 2, xx - size // 2).astype(int)
-    profile = np.bincount(radius.ravel(), power.ravel()) / np.maximum(np.bincount(radius.ravel()), 1)
-    # Whiten the ~1/f^2 spectrum of shading and blotches (the spectrum of the gradient), so the
-    # narrow ridge peak wins over low-frequency energy.
-    profile = profile * np.arange(len(profile), dtype=np.float64) ** 2
-    low, high = int(np.ceil(size / max_period)), int(min(len(profile) - 2, size / min_period))
-    if high <= low + 2:
-        return TARGET_PERIOD_PX
-    peak = low + int(np.argmax(profile[low:high]))
-    if profile[peak] < 3.0 * np.median(profile[low:high]):
-        return TARGET_PERIOD_PX
-    # Parabolic refinement of the peak frequency.
-    left_value, centre_value, right_value = profile[peak - 1], profile[peak], profile[peak + 1]
-    denominator = left_value - 2 * centre_value + right_value
-    offset = 0.5 * (left_value - right_value) / denominator if denominator < 0 else 0.0
-    return float(size / (peak + np.clip(offset, -0.5, 0.5)))
-
-
-def _band_pass(gray: np.ndarray, mask: np.ndarray, period: float) -> np.ndarray:
-    """Ridge texture with shading removed: DoG around the ridge frequency, normalised to unit local RMS."""
-    fine = cv2.GaussianBlur(gray, (0, 0), 0.18 * period)
-    coarse = cv2.GaussianBlur(gray, (0, 0), 0.6 * period)
-    band = (fine - coarse) * mask
-    rms = np.sqrt(cv2.GaussianBlur(band * band, (0, 0), period) + 1e-8)
-    return (band / rms).astype(np.float32)
 
 
 def _to_uint8(gray: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -287,27 +216,6 @@ def _mutual_ratio_match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float,
 # ------------------------------------------------------------------------------------------------
 # Geometric verification and refinement
 # ------------------------------------------------------------------------------------------------
-
-def _fundamental(uv_a: np.ndarray, uv_b: np.ndarray, threshold: float) -> tuple[np.ndarray | None, np.ndarray]:
-    """MAGSAC++ fundamental matrix and inlier mask ``[N]`` (None and all-False when it fails)."""
-    if len(uv_a) < 8:
-        return None, np.zeros(len(uv_a), bool)
-    F, inliers = cv2.findFundamentalMat(uv_a, uv_b, cv2.USAC_MAGSAC, threshold, 0.9999, 10000)
-    if F is None or F.shape != (3, 3) or inliers is None:
-        return None, np.zeros(len(uv_a), bool)
-    return F, inliers.ravel().astype(bool)
-
-
-def _sampson(F: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
-    """Sampson epipolar distance in pixels ``[N]``."""
-    xa = np.concatenate([uv_a, np.ones((len(uv_a), 1))], axis=1)
-    xb = np.concatenate([uv_b, np.ones((len(uv_b), 1))], axis=1)
-    Fxa = xa @ F.T
-    Ftxb = xb @ F
-    numerator = np.sum(xb * Fxa, axis=1) ** 2
-    denominator = Fxa[:, 0] ** 2 + Fxa[:, 1] ** 2 + Ftxb[:, 0] ** 2 + Ftxb[:, 1] ** 2
-    return np.sqrt(numerator / np.maximum(denominator, 1e-30))
-
 
 def _ecc_refine(band_a: np.ndarray, band_b: np.ndarray, uv_a: np.ndarray, guess_b: np.ndarray,
                 linear: np.ndarray, half: int, verify_half: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -422,7 +330,7 @@ def match_views(image_a: np.ndarray, mask_a: np.ndarray | None, image_b: np.ndar
     scale = 1.0 if target_period_px is None else min(1.0, float(target_period_px) / period)
     small = [_resize(gray, mask, scale) for gray, mask in ((gray_a, mask_a), (gray_b, mask_b))]
     small_period = period * scale
-    bands = [_band_pass(g, m, small_period) if method == "minutiae" else None for g, m in small]
+    bands = [ridge_texture(g, m, small_period) if method == "minutiae" else None for g, m in small]
     (points_a, desc_a), (points_b, desc_b) = (
         _detect_describe(method, g, m, small_period, band) for (g, m), band in zip(small, bands))
     if desc_a is None or desc_b is None:
@@ -433,7 +341,7 @@ def match_views(image_a: np.ndarray, mask_a: np.ndarray | None, image_b: np.ndar
     uv_a = (points_a[ia] + 0.5) / scale - 0.5
     uv_b = (points_b[ib] + 0.5) / scale - 0.5
     threshold = max(1.0, period / 4.0) if epipolar_px is None else float(epipolar_px)
-    F, inliers = _fundamental(uv_a, uv_b, threshold)
+    F, inliers = fundamental_inliers(uv_a, uv_b, threshold)
     if F is None or inliers.sum() < min_matches:
         return Matches.empty(method, n_putative, time.perf_counter() - start)
     uv_a, uv_b, ratios = uv_a[inliers], uv_b[inliers], ratios[inliers]
@@ -453,8 +361,8 @@ def match_views(image_a: np.ndarray, mask_a: np.ndarray | None, image_b: np.ndar
 def _refine_minutiae(gray_a, mask_a, gray_b, mask_b, uv_a, uv_b, all_a, period, threshold,
                      min_correlation, densify, max_matches):
     """ECC-refine verified minutia matches, add guided ones, drop locally inconsistent ones."""
-    band_a = _band_pass(gray_a, mask_a, period)
-    band_b = _band_pass(gray_b, mask_b, period)
+    band_a = ridge_texture(gray_a, mask_a, period)
+    band_b = ridge_texture(gray_b, mask_b, period)
     half = int(round(ECC_HALF_PERIODS * period))
     verify_half = int(round(VERIFY_HALF_PERIODS * period))
     # Identity start: a local fit from the putative neighbours is worse (they still hold outliers).
@@ -462,7 +370,7 @@ def _refine_minutiae(gray_a, mask_a, gray_b, mask_b, uv_a, uv_b, all_a, period, 
     refined, correlation, wide = _ecc_refine(band_a, band_b, uv_a, uv_b, linear, half, verify_half)
     keep = np.isfinite(refined).all(axis=1) & (correlation >= min_correlation) & (wide >= MIN_WIDE_CORRELATION)
     uv_a, uv_b, score = uv_a[keep], refined[keep], correlation[keep]
-    F, inliers = _fundamental(uv_a, uv_b, min(threshold, 1.0))
+    F, inliers = fundamental_inliers(uv_a, uv_b, min(threshold, 1.0))
     if F is None or inliers.sum() < 8:
         return uv_a[:0], uv_b[:0], score[:0]
     uv_a, uv_b, score = uv_a[inliers], uv_b[inliers], score[inliers]
@@ -475,7 +383,7 @@ def _refine_minutiae(gray_a, mask_a, gray_b, mask_b, uv_a, uv_b, all_a, period, 
         predicted, linear = _local_linear(uv_a, uv_b, candidates)
         refined, correlation, wide = _ecc_refine(band_a, band_b, candidates, predicted, linear, half, verify_half)
         ok = np.isfinite(refined).all(axis=1) & (correlation >= min_correlation) & (wide >= MIN_WIDE_CORRELATION)
-        ok[ok] &= _sampson(F, candidates[ok], refined[ok]) < min(threshold, 1.0)
+        ok[ok] &= sampson_distance(F, candidates[ok], refined[ok]) < min(threshold, 1.0)
         ok[ok] &= np.linalg.norm(refined[ok] - predicted[ok], axis=1) < 0.5 * period
         uv_a = np.concatenate([uv_a, candidates[ok]])
         uv_b = np.concatenate([uv_b, refined[ok]])
@@ -549,7 +457,7 @@ def _densify(band_a, band_b, mask_a, uv_a, uv_b, F, period, half, verify_half, m
         predicted, linear = _local_linear(known_a, known_b, candidates)
         refined, correlation, wide = _ecc_refine(band_a, band_b, candidates, predicted, linear, half, verify_half)
         ok = np.isfinite(refined).all(axis=1) & (correlation >= min_correlation) & (wide >= MIN_WIDE_CORRELATION)
-        ok[ok] &= _sampson(F, candidates[ok], refined[ok]) < 1.0
+        ok[ok] &= sampson_distance(F, candidates[ok], refined[ok]) < 1.0
         ok[ok] &= np.linalg.norm(refined[ok] - predicted[ok], axis=1) < 0.5 * period
         new_a.append(candidates[ok])
         new_b.append(refined[ok])

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..pointmaps.base import PairPointmaps, Pointmap
-from .global_opt import PairCorrespondences, _weighted_median
+from .global_opt import PairCorrespondences, weighted_median
 from .procrustes import Similarity, umeyama
 
 __all__ = ["PointmapPairConfig", "PointmapPairRegistration", "register_pointmap_pair", "frame_similarity"]
@@ -186,12 +186,12 @@ def register_pointmap_pair(pointmap_a: Pointmap, pointmap_b: Pointmap, pair_ab: 
     try:
         model = umeyama(src_all, dst_all, w_all)
         residual = np.linalg.norm(model.apply(src_all) - dst_all, axis=1)
-        inlier = residual <= config.trim * max(_weighted_median(residual, w_all), 1e-300)
+        inlier = residual <= config.trim * max(weighted_median(residual, w_all), 1e-300)
         model = umeyama(src_all[inlier], dst_all[inlier], w_all[inlier])
     except InputError as error:
         return failed(f"degenerate pointmaps: {error}")
     residual = np.linalg.norm(model.apply(src_all) - dst_all, axis=1)
-    inlier = residual <= config.trim * max(_weighted_median(residual, w_all), 1e-300)
+    inlier = residual <= config.trim * max(weighted_median(residual, w_all), 1e-300)
     uv_a, uv_b, kept_weight = [], [], []
     start = 0
     for (in_own, own, own_mask, forward), pixels, w in zip(projected, pixels_other, weight):

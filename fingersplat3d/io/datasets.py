@@ -76,12 +76,14 @@ def _image_files(folder_or_files: str | Path | Iterable[str | Path], recursive: 
     return files, files[0].parent
 
 
-def _read_same_size(paths: Sequence[Path], gray: bool | None) -> list[np.ndarray]:
+def _read_views(paths: Sequence[Path], gray: bool | None) -> list[np.ndarray]:
+    """The images of one capture: sizes and orientations may differ (a camera stored portrait), channels may not."""
     images = [read_image(path, gray=gray) for path in paths]
     for path, image in zip(paths[1:], images[1:]):
-        if image.shape[:2] != images[0].shape[:2]:
-            raise input_error(path, f"image is {image.shape[1]}x{image.shape[0]} but {paths[0].name} is "
-                                    f"{images[0].shape[1]}x{images[0].shape[0]}; all views must have the same size")
+        if image.ndim != images[0].ndim:
+            kinds = {2: "grayscale", 3: "colour"}
+            raise input_error(path, f"image is {kinds[image.ndim]} but {paths[0].name} is {kinds[images[0].ndim]}; "
+                                    "the views of one capture must all be grayscale or all colour")
     return images
 
 
@@ -150,7 +152,7 @@ def load_uwa(folder_or_files: str | Path | Iterable[str | Path], subject: object
                 expected = some.with_name(f"{group.subject}_{group.finger}_{group.capture}_{frame}{some.suffix}")
                 raise input_error(expected, f"UWA {group.label} is missing frame {frame}")
         paths = [group.frames[frame] for frame in wanted]
-        images = _read_same_size(paths, gray)
+        images = _read_views(paths, gray)
         names = [f"f{frame}" for frame in wanted]
         metadata = {"dataset": "uwa", "subject": group.subject, "finger": group.finger, "capture": group.capture,
                     "sources": {name: str(path) for name, path in zip(names, paths)},
@@ -217,8 +219,8 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
     """One capture from a folder of images (natural name order) or a list of files (given order).
 
     Views are named by file stem; ``<stem>_mask.png`` files in the folder are masks, not views,
-    and a mask is found as ``masks/<stem>.png`` or ``<stem>_mask.png`` next to its image. All
-    images must have the same size; fewer than ``min_views`` images is an ``InputError``.
+    and a mask is found as ``masks/<stem>.png`` or ``<stem>_mask.png`` next to its image. Views may
+    differ in size; fewer than ``min_views`` images is an ``InputError``.
     Metadata: ``dataset`` ``"images"`` and ``sources`` (view -> path).
     """
     explicit = not isinstance(folder_or_files, (str, Path)) or Path(folder_or_files).is_file()
@@ -236,7 +238,7 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
         if path.stem in seen:
             raise input_error(path, f"has the same name as {seen[path.stem]}; view names must be unique")
         seen[path.stem] = path
-    images = _read_same_size(files, gray)
+    images = _read_views(files, gray)
     views = []
     for path, image in zip(files, images):
         mask_path = _find_mask(path)

@@ -36,12 +36,11 @@ from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, Sequence
 
 import numpy as np
-from scipy.ndimage import median_filter
-from scipy.signal import savgol_filter
 
 from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
+from ..segment.silhouette import chord_sections, principal_axis
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -156,14 +155,14 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = _principal_axis(u, v)
+    axis, origin = principal_axis(u, v)
     normal = np.array([-axis[1], axis[0]])
     # Coordinates along (s) and across (t) the axis, for the mask pixels only.
     du, dv = u - origin[0], v - origin[1]
     s = du * axis[0] + dv * axis[1]
     t = du * normal[0] + dv * normal[1]
     on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
-    sections = _sections(s, t, on_border, smoothing)
+    sections = chord_sections(s, t, on_border, smoothing)
     relief = sections.height(s, t) * depth_ratio
     if focal is not None:
         centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0]) - origin
@@ -174,86 +173,6 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     height = np.zeros((rows, cols), np.float32)
     height[v, u] = relief
     return FingerHeight(height, _confidence(height, mask, confidence_knee), axis)
-
-
-@dataclass(frozen=True, eq=False)
-class _Sections:
-    """The swept section: chord half-width and centre per 1-px station along the axis."""
-
-    start: float  # s at the start of station 0
-    half_width: np.ndarray  # [N] pixels
-    centre: np.ndarray  # [N] t of the chord centre
-
-    def height(self, s: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Unit-ratio relief ``sqrt(w(s)^2 - (t - c(s))^2)``, 0 off the section (pixels)."""
-        station = s - self.start
-        knots = np.arange(self.half_width.size) + 0.5
-        w = np.interp(station, knots, self.half_width)
-        c = np.interp(station, knots, self.centre)
-        outside = (station < -0.5) | (station > self.half_width.size + 0.5)
-        return np.where(outside, 0.0, np.sqrt(np.maximum(w * w - (t - c) ** 2, 0.0)))
-
-
-def _principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit direction of largest spread of the pixels and their centroid (x axis when undefined)."""
-    centre = np.array([u.mean(), v.mean()])
-    if u.size < 2:
-        return np.array([1.0, 0.0]), centre
-    du, dv = u - centre[0], v - centre[1]
-    cov = np.array([[np.dot(du, du), np.dot(du, dv)], [np.dot(du, dv), np.dot(dv, dv)]]) / u.size
-    values, vectors = np.linalg.eigh(cov)
-    if values[1] - values[0] <= 1e-9 * max(values[1], 1e-12):
-        return np.array([1.0, 0.0]), centre  # round blob: any direction is an axis
-    return vectors[:, 1], centre
-
-
-def _sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float) -> _Sections:
-    """Per-station (1 px along the axis) chord half-width and centre, completed and smoothed."""
-    s0 = float(s.min())
-    index = np.floor(s - s0).astype(np.int64)
-    count = int(index.max()) + 1
-    low = np.full(count, np.inf)
-    high = np.full(count, -np.inf)
-    np.minimum.at(low, index, t)
-    np.maximum.at(high, index, t)
-    present = np.isfinite(low)
-    # A chord end on the image border is cut by the frame, not by the finger's outline.
-    border_low = np.full(count, np.inf)
-    border_high = np.full(count, -np.inf)
-    np.minimum.at(border_low, index[on_border], t[on_border])
-    np.maximum.at(border_high, index[on_border], t[on_border])
-    cut_low = present & (border_low <= low + 1.0)
-    cut_high = present & (border_high >= high - 1.0)
-    half_width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)  # +0.5: pixels have extent
-    centre = np.where(present, 0.5 * (high + low), np.nan)
-    whole = present & ~cut_low & ~cut_high
-    cut = present & ~whole
-    stations = np.arange(count)
-    if cut.any() and whole.any():
-        # Complete the width from the nearest whole chords and keep the seen end where it is
-        # (a chord cut at both ends takes its centre from its neighbours too).
-        half_width[cut] = np.maximum(np.interp(stations[cut], stations[whole], half_width[whole]), half_width[cut])
-        seen_high = cut & cut_low & ~cut_high
-        seen_low = cut & cut_high & ~cut_low
-        centre[seen_high] = high[seen_high] + 0.5 - half_width[seen_high]
-        centre[seen_low] = low[seen_low] - 0.5 + half_width[seen_low]
-        both = cut & cut_low & cut_high
-        centre[both] = np.interp(stations[both], stations[whole], centre[whole])
-    if not present.all():  # a thin diagonal mask can leave a station empty
-        half_width = np.interp(stations, stations[present], half_width[present])
-        centre = np.interp(stations, stations[present], centre[present])
-    window = int(round(smoothing * 2.0 * float(np.median(half_width))))
-    if window >= 3 and count >= 3:
-        window = min(window | 1, count - (1 - count % 2))  # odd, at most the station count
-        half_width = median_filter(half_width, size=window, mode="nearest")
-        centre = median_filter(centre, size=window, mode="nearest")
-        # Outline pixels quantise the chords into 1-px steps, which would print as depth terraces.
-        # A local quadratic of w^2 removes them and is exact over an ellipsoidal cap (w^2 is
-        # quadratic in s there) as well as over a straight or tapered body.
-        if count > window:
-            half_width = np.sqrt(np.maximum(savgol_filter(half_width ** 2, window, 2, mode="interp"), 0.25))
-            centre = savgol_filter(centre, window, 2, mode="interp")
-    return _Sections(s0, half_width, centre)
 
 
 def _confidence(height: np.ndarray, mask: np.ndarray, knee: float) -> np.ndarray:

@@ -13,7 +13,9 @@ any exposure: 16-bit data that only uses the bottom of the range works too):
    so the outline lands on the true silhouette on both sides; a plain Otsu split (between the
    background and the *mean* skin) cuts off the darker rim;
 4. skin darker than that midpoint (valleys, the crease, the shaded side) still clears a noise
-   floor; the noise-floor mask, eroded by 2 px (more than its outward bias), fills such notches;
+   floor; the noise-floor mask, eroded by 2 px (more than its outward bias), fills such notches,
+   but only where a closing of the skin mask encloses them: a dim glow or support under the
+   finger (seen on real UWA side views) clears the noise floor as well and is not skin;
 5. morphological close then open (kernel ~0.5 % of the image size), the outline smoothed by a
    sub-pixel blur of the mask, the largest connected component, holes filled.
 
@@ -38,6 +40,8 @@ MIN_CONTRAST_SIGMAS = 6.0  # skin must stand this many background-noise sigmas a
 MAX_COVERAGE = 0.95  # a "finger" covering more of the frame than this means there is no background
 MIN_AREA_PX = 4  # fewer finger pixels than this is no finger
 LOW_MASK_EROSION_PX = 2  # more than the outward bias of the noise-floor edge (~1 px after blurs)
+ROUGH_LEVEL = 0.25  # share of the skin contrast above which the first, rough mask lies (above dim glows)
+NOTCH_RADIUS_SCALE = 4  # notches (valleys, a crease) narrower than this many closing radii are filled
 EDGE_BAND = (1.5, 4.0)  # band inside the rough mask (px from its edge) where the edge skin level is read
 
 
@@ -50,9 +54,13 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     # Skin darker than the midpoint (valleys, a crease, the shaded side) still clears the noise
     # floor; that low mask, eroded past its outward bias, fills such notches without moving edges.
     low = cv2.erode((smooth > floor).view(np.uint8), _disc(LOW_MASK_EROSION_PX), borderType=cv2.BORDER_REPLICATE)
-    mask = (smooth > threshold) | low.view(bool)
+    high = (smooth > threshold).view(np.uint8)
     radius = max(1, round(0.005 * max(height, width)))
     kernel = _disc(radius)
+    # Only notches of the skin mask are filled from the low mask: a dim glow or a support under
+    # the finger clears the noise floor too, but it is not enclosed by skin.
+    notches = cv2.morphologyEx(high, cv2.MORPH_CLOSE, _disc(NOTCH_RADIUS_SCALE * radius), borderType=cv2.BORDER_REPLICATE)
+    mask = high.view(bool) | (low.view(bool) & notches.view(bool))
     mask8 = mask.view(np.uint8)
     # Close then open; the border is replicated so a finger cut by the frame stays cut straight.
     mask8 = cv2.morphologyEx(mask8, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE)
@@ -118,7 +126,7 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
     # at the silhouette is read in a thin band inside it. That level differs between the lit and
     # the shaded side, so it is averaged locally (normalised Gaussian over ~1.5 % of the image
     # size), on a grid a few times coarser than the image, which is all such a smooth map needs.
-    rough = (smooth > max(floor, bg_level + 0.15 * contrast)).view(np.uint8)
+    rough = (smooth > max(floor, bg_level + ROUGH_LEVEL * contrast)).view(np.uint8)
     inside = cv2.distanceTransform(rough, cv2.DIST_L2, 3)
     band = ((inside >= EDGE_BAND[0]) & (inside <= EDGE_BAND[1])).astype(np.float32)
     if np.count_nonzero(band) < 16:

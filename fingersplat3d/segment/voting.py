@@ -35,7 +35,7 @@ import torch
 from ..errors import InputError
 from ..scene import Camera
 from ..splat.gaussians import Gaussians
-from ..splat.quaternion import quaternion_to_matrix
+from ..rotations import quaternion_to_matrix
 
 __all__ = ["Votes", "CleanConfig", "CleanStats", "vote_labels", "straddle_axes", "split_gaussians",
            "clean_with_masks"]

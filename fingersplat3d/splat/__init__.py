@@ -5,10 +5,10 @@ fused point cloud into initial Gaussians lives in :mod:`fingersplat3d.splat.init
 on demand.
 """
 from .camera_path import RigGeometry, arc_cameras, cameras_at_angles, rig_geometry
-from .gaussians import SH_C0, Gaussians, rgb_to_sh, sh_to_rgb
+from .gaussians import SH_C0, Gaussians, covariance_3d, rgb_to_sh, sh_to_rgb
 from .losses import masked_l1, photometric_loss, ssim, ssim_map
 from .project import Projection, project_gaussians
-from .quaternion import covariance_3d, matrix_to_quaternion, normalize_quaternions, quaternion_to_matrix
+from ..rotations import matrix_to_quaternion, normalize_quaternions, quaternion_to_matrix
 from .rasterize import RenderOutput, rasterize
 from .reference import reference_rasterize
 

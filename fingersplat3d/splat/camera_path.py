@@ -22,7 +22,7 @@ All inputs must share the image size; ``K`` is interpolated the same way (all eq
 
 Degenerate input raises ``ValueError``: fewer than 2 cameras, cameras with the same orientation
 (no axis to turn about), or parallel optical axes (no pivot). numpy, with the quaternion conversions of
-:mod:`.quaternion`.
+:mod:`fingersplat3d.rotations`.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from ..scene import Camera
-from .quaternion import matrix_to_quaternion, quaternion_to_matrix
+from ..rotations import matrix_to_quaternion, quaternion_to_matrix
 
 __all__ = ["RigGeometry", "rig_geometry", "arc_cameras", "cameras_at_angles"]
 

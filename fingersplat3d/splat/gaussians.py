@@ -11,9 +11,9 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from .quaternion import normalize_quaternions
+from ..rotations import normalize_quaternions, quaternion_to_matrix
 
-__all__ = ["Gaussians", "SH_C0", "rgb_to_sh", "sh_to_rgb"]
+__all__ = ["Gaussians", "SH_C0", "rgb_to_sh", "sh_to_rgb", "covariance_3d"]
 
 SH_C0 = 0.28209479177387814
 """The degree-0 real spherical harmonic, ``1 / (2 sqrt(pi))``."""
@@ -93,3 +93,9 @@ class Gaussians:
 
     def with_(self, **changes: torch.Tensor) -> "Gaussians":
         return replace(self, **changes)
+
+
+def covariance_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
+    """``Sigma = R S S R^T`` from ``[N, 4]`` wxyz quaternions and ``[N, 3]`` standard deviations."""
+    rotation_scale = quaternion_to_matrix(quats) * scales[..., None, :]
+    return rotation_scale @ rotation_scale.transpose(-1, -2)

@@ -24,7 +24,7 @@ import torch
 
 from ..errors import input_error
 from .gaussians import Gaussians, rgb_to_sh
-from .quaternion import matrix_to_quaternion
+from ..rotations import matrix_to_quaternion
 
 __all__ = ["gaussians_from_cloud", "knn_mean_distance"]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from ..align.global_opt import axis_angle_to_matrix
+from ..rotations import axis_angle_to_matrix
 
 __all__ = ["apply_pose_correction", "correction_matrix"]
 

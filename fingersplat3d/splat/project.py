@@ -18,7 +18,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from .quaternion import quaternion_to_matrix
+from ..rotations import quaternion_to_matrix
 
 __all__ = ["ALPHA_MAX", "ALPHA_MIN", "Projection", "footprint_boxes", "project_gaussians"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from .quaternion import covariance_3d
+from .gaussians import covariance_3d
 from .rasterize import RenderOutput, check_render_inputs
 
 __all__ = ["reference_project", "reference_rasterize"]

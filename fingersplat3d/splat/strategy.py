@@ -14,7 +14,7 @@ import torch
 
 from .config import SplatConfig
 from .gaussians import Gaussians
-from .quaternion import quaternion_to_matrix
+from ..rotations import quaternion_to_matrix
 
 __all__ = ["DensifyStats", "GradientStats", "densify_and_prune", "replace_rows", "gaussians_of"]
 

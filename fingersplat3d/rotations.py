@@ -1,13 +1,16 @@
-"""Quaternions (wxyz, as in the 3DGS PLY format) and Gaussian covariances, in torch.
+"""Rotations in torch: axis-angle (Rodrigues) and quaternions (wxyz, as in the 3DGS PLY format).
 
-Pure math: no Open3D, no files. Quaternions need not be normalised; a zero quaternion is read as
-the identity rotation (finite values and gradients), so a degenerate parameter never poisons a fit.
+The one home of rotation math for the torch code (global alignment, pose corrections, Gaussians);
+numpy code uses :class:`scipy.spatial.transform.Rotation`. Pure math: no Open3D, no files.
+Quaternions need not be normalised; a zero quaternion is read as the identity rotation (finite
+values and gradients), so a degenerate parameter never poisons a fit. Axis-angle is finite, with
+finite gradients, at zero.
 """
 from __future__ import annotations
 
 import torch
 
-__all__ = ["normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion", "covariance_3d"]
+__all__ = ["axis_angle_to_matrix", "normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion"]
 
 _TINY = 1e-12
 
@@ -52,7 +55,17 @@ def matrix_to_quaternion(matrices: torch.Tensor) -> torch.Tensor:
     return torch.where(quats[..., :1] < 0, -quats, quats)
 
 
-def covariance_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
-    """``Sigma = R S S R^T`` from ``[N, 4]`` wxyz quaternions and ``[N, 3]`` standard deviations."""
-    rotation_scale = quaternion_to_matrix(quats) * scales[..., None, :]
-    return rotation_scale @ rotation_scale.transpose(-1, -2)
+def axis_angle_to_matrix(omega: torch.Tensor) -> torch.Tensor:
+    """Batched Rodrigues ``[..., 3] -> [..., 3, 3]``, with finite values and gradients at zero."""
+    theta2 = (omega * omega).sum(-1, keepdim=True)[..., None]  # [..., 1, 1]
+    small = theta2 < 1e-12
+    safe = torch.where(small, torch.ones_like(theta2), theta2)  # keeps sqrt's gradient finite
+    theta = torch.sqrt(safe)
+    a = torch.where(small, 1.0 - theta2 / 6.0, torch.sin(theta) / theta)
+    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / safe)
+    x, y, z = omega[..., 0], omega[..., 1], omega[..., 2]
+    zero = torch.zeros_like(x)
+    cross = torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
+                         torch.stack([-y, x, zero], -1)], -2)
+    eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
+    return eye + a * cross + b * (cross @ cross)

@@ -1,0 +1,177 @@
+"""The global-alignment problem as a torch module: its parameters, and a call that returns its loss.
+
+Unknowns (float64), in *normalised units* where the root view's median pointmap depth is 1:
+
+* a rigid ``cam_to_world`` per view: a rotation-vector update on the initial rotation and a
+  translation; the root view is fixed (the gauge);
+* one shared focal length (or one per view), principal point at each image's centre;
+* per view a depth surface on top of the backend's own pointmap depth ``z_v``:
+  ``depth_v(p) = s_v (m_v + alpha_v (z_v(p) - m_v) + r_v F_v(p))`` where ``m_v`` is the median
+  pointmap depth, ``alpha_v`` scales the relief (a wrong cross-section is too flat or too deep),
+  ``r_v`` is the pointmap's relief (so the field is O(1)) and ``F_v`` a cubic B-spline field
+  (:mod:`fingersplat3d.align.depth_field`); ``s_root = 1`` fixes the overall scale.
+
+Loss, over the correspondences ``(p in a, q in b)`` of every pair, each with its information
+matrices (see :mod:`fingersplat3d.align.guided`; identity when a matcher gives none): the
+symmetric reprojection error, a's point through a's depth into b against ``q`` and b's point
+through b's depth into a against ``p``, each ``r^T I r`` in Cauchy-robust form; plus a bending
+penalty on each field, a pull of ``log alpha`` toward 0 and of the focal toward its guess.
+Correspondence weights are normalised to sum to 1, so the priors' strengths do not depend on
+how many matches there are. Pure torch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from ..rotations import axis_angle_to_matrix
+from .depth_field import FieldGrid
+
+__all__ = ["Correspondences", "InitialState", "AlignmentProblem"]
+
+
+@dataclass(frozen=True, eq=False)
+class Correspondences:
+    """All pairs' correspondences, flattened, with the pointmap depth at both ends."""
+
+    view_a: np.ndarray  # [M] int
+    view_b: np.ndarray  # [M] int
+    uv_a: np.ndarray  # [M, 2]
+    uv_b: np.ndarray  # [M, 2]
+    z_a: np.ndarray  # [M] pointmap depth of view a at uv_a
+    z_b: np.ndarray  # [M]
+    weight: np.ndarray  # [M] >= 0, sums to 1
+    information_a: np.ndarray  # [M, 2, 2] in a's pixels
+    information_b: np.ndarray  # [M, 2, 2] in b's pixels
+
+
+@dataclass(frozen=True, eq=False)
+class InitialState:
+    """Where the optimisation starts (normalised units)."""
+
+    rotations: np.ndarray  # [N, 3, 3] cam_to_world rotations
+    translations: np.ndarray  # [N, 3]
+    log_scales: np.ndarray  # [N]
+    log_alphas: np.ndarray  # [N]
+    log_focals: np.ndarray  # [N] (equal when shared)
+    fields: list[np.ndarray]  # per view [grid size]
+
+
+class AlignmentProblem(torch.nn.Module):
+    """See the module docstring. ``free[v]`` is False for the root and for views no pair reaches."""
+
+    def __init__(self, depths: Sequence[np.ndarray], grids: Sequence[FieldGrid], data: Correspondences,
+                 initial: InitialState, free: Sequence[bool], *, shared_focal: bool, optimize_focal: bool,
+                 focal_guess: np.ndarray, robust_px: float, alpha_prior: float, field_smoothness: float,
+                 field_prior: float, focal_prior: float) -> None:
+        super().__init__()
+        dtype = torch.float64
+        n_views = len(depths)
+        finite = [d[np.isfinite(d)] for d in depths]
+        medians = [float(np.median(f)) if f.size else 1.0 for f in finite]
+        reliefs = [max(float(np.percentile(np.abs(f - m), 90)) if f.size else 0.0, 1e-6 * abs(m) + 1e-12)
+                   for f, m in zip(finite, medians)]
+        self.grids = list(grids)
+        offsets = np.cumsum([0] + [g.size for g in self.grids])
+        self.field_offsets = offsets
+        self.shared_focal = shared_focal
+        self.robust_px = robust_px
+        self.alpha_prior, self.field_smoothness = alpha_prior, field_smoothness
+        self.field_prior, self.focal_prior = field_prior, focal_prior
+        centres = [[(d.shape[1] - 1) / 2.0, (d.shape[0] - 1) / 2.0] for d in depths]
+
+        def buffer(name, value, kind=dtype):
+            self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=kind))
+
+        buffer("medians", medians)
+        buffer("reliefs", reliefs)
+        buffer("centres", centres)
+        buffer("free", np.asarray(free, np.float64))
+        buffer("base_rotation", initial.rotations)
+        buffer("base_translation", initial.translations)
+        buffer("base_log_scale", initial.log_scales)
+        buffer("log_focal_guess", np.log(np.broadcast_to(np.asarray(focal_guess, np.float64), (n_views,))))
+        for end in ("a", "b"):
+            view = getattr(data, f"view_{end}")
+            index, weight = np.zeros((len(view), 16), np.int64), np.zeros((len(view), 16))
+            for v in np.unique(view):
+                rows = view == v
+                basis = self.grids[v].basis(getattr(data, f"uv_{end}")[rows])
+                index[rows], weight[rows] = basis.index + offsets[v], basis.weight
+            buffer(f"view_{end}", view, torch.long)
+            buffer(f"uv_{end}", getattr(data, f"uv_{end}"))
+            buffer(f"z_{end}", getattr(data, f"z_{end}"))
+            buffer(f"info_{end}", getattr(data, f"information_{end}"))
+            buffer(f"basis_index_{end}", index, torch.long)
+            buffer(f"basis_weight_{end}", weight)
+        buffer("weight", data.weight)
+        triples, coefficients = zip(*[g.bending() for g in self.grids]) if self.grids else ((), ())
+        bend = np.concatenate([t + offsets[v] for v, t in enumerate(triples)]) if triples else np.zeros((0, 3), np.int64)
+        buffer("bend_index", bend, torch.long)
+        self.omega = torch.nn.Parameter(torch.zeros((n_views, 3), dtype=dtype))
+        self.translation = torch.nn.Parameter(torch.as_tensor(initial.translations, dtype=dtype).clone())
+        self.log_scale = torch.nn.Parameter(torch.as_tensor(initial.log_scales, dtype=dtype).clone())
+        self.log_alpha = torch.nn.Parameter(torch.as_tensor(initial.log_alphas, dtype=dtype).clone())
+        focal = np.asarray(initial.log_focals, np.float64)
+        self.log_focal = torch.nn.Parameter(torch.as_tensor([focal.mean()] if shared_focal else focal, dtype=dtype).clone(),
+                                            requires_grad=optimize_focal)
+        self.field = torch.nn.Parameter(torch.as_tensor(np.concatenate(initial.fields) if initial.fields else np.zeros(0), dtype=dtype).clone())
+
+    # -- the current unknowns -------------------------------------------------------------------
+    def rotations(self) -> torch.Tensor:
+        """``[N, 3, 3]`` cam_to_world rotations (the root and unreached views keep their initial rotation)."""
+        return axis_angle_to_matrix(self.omega * self.free[:, None]) @ self.base_rotation
+
+    def translations(self) -> torch.Tensor:
+        free = self.free[:, None]
+        return self.translation * free + self.base_translation * (1 - free)
+
+    def scales(self) -> torch.Tensor:
+        return torch.exp(self.log_scale * self.free + self.base_log_scale * (1 - self.free))
+
+    def focals(self) -> torch.Tensor:
+        count = self.medians.shape[0]
+        return torch.exp(self.log_focal.expand(count) if self.shared_focal else self.log_focal)
+
+    def depth(self, view: torch.Tensor, z: torch.Tensor, index: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+        field = (self.field[index] * weight).sum(-1) if self.field.numel() else torch.zeros_like(z)
+        median = self.medians[view]
+        return self.scales()[view] * (median + torch.exp(self.log_alpha[view]) * (z - median) + self.reliefs[view] * field)
+
+    def world_points(self, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        focal = self.focals()[view]
+        rays = torch.cat([(uv - self.centres[view]) / focal[:, None], torch.ones_like(uv[:, :1])], dim=1)
+        return torch.einsum("nij,nj->ni", self.rotations()[view], depth[:, None] * rays) + self.translations()[view]
+
+    def project(self, view: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        camera = torch.einsum("nji,nj->ni", self.rotations()[view], points - self.translations()[view])
+        z = camera[:, 2].clamp_min(1e-9)
+        return camera[:, :2] / z[:, None] * self.focals()[view][:, None] + self.centres[view]
+
+    # -- the loss -------------------------------------------------------------------------------
+    def correspondence_terms(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """World points of both ends ``[M, 3]`` and the information-weighted squared errors ``[M]`` a->b and b->a."""
+        depth_a = self.depth(self.view_a, self.z_a, self.basis_index_a, self.basis_weight_a)
+        depth_b = self.depth(self.view_b, self.z_b, self.basis_index_b, self.basis_weight_b)
+        x_a = self.world_points(self.view_a, self.uv_a, depth_a)
+        x_b = self.world_points(self.view_b, self.uv_b, depth_b)
+        r_ab = self.project(self.view_b, x_a) - self.uv_b
+        r_ba = self.project(self.view_a, x_b) - self.uv_a
+        e_ab = torch.einsum("ni,nij,nj->n", r_ab, self.info_b, r_ab)
+        e_ba = torch.einsum("ni,nij,nj->n", r_ba, self.info_a, r_ba)
+        return x_a, x_b, e_ab, e_ba
+
+    def forward(self) -> torch.Tensor:
+        _, _, e_ab, e_ba = self.correspondence_terms()
+        scale = self.robust_px ** 2
+        loss = (self.weight * (torch.log1p(e_ab / scale) + torch.log1p(e_ba / scale))).sum()
+        if self.bend_index.numel():
+            bend = self.field[self.bend_index[:, 0]] - 2 * self.field[self.bend_index[:, 1]] + self.field[self.bend_index[:, 2]]
+            loss = loss + self.field_smoothness * (bend ** 2).sum()
+        loss = loss + self.field_prior * (self.field ** 2).sum() + self.alpha_prior * (self.log_alpha ** 2).sum()
+        guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
+        return loss + self.focal_prior * ((self.log_focal - guess) ** 2).sum()
+

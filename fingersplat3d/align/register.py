@@ -1,0 +1,205 @@
+"""Register the views of one finger from their photos: correspondences, pair similarities, global alignment.
+
+The loop (all numbers scale with the measured ridge period):
+
+1. **first guess of each pair** (``matcher='surface'``, the default): both views' ridge textures
+   unwrapped on their cylinder charts, their shift voted by patches
+   (:mod:`~fingersplat3d.align.chart_shift`), and guided matching through the charts with a
+   search of two ridge periods (:mod:`~fingersplat3d.align.guided`); the classic matchers
+   (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.features` can stand in for it;
+2. **verification**: a robust fundamental matrix (:mod:`~fingersplat3d.align.epipolar`); a
+   pair is registered when at least ``min_matches`` correspondences agree with it, and its
+   similarity ``b_to_a`` comes from the two pointmaps at the matched pixels
+   (:func:`~fingersplat3d.align.pairwise.register_pair`);
+3. **global alignment** of all registered pairs from their maximum spanning tree
+   (:func:`~fingersplat3d.align.global_opt.global_align`);
+4. **guided rounds**: every pair of aligned views is matched again, predicted through the 3D
+   model (:class:`~fingersplat3d.align.model_predictor.ModelPredictor`) with a search of
+   ``guided_search`` periods (pairs that had no first guess, such as views 90 degrees apart, get
+   one now), verified, and the alignment is refined from where it stands. The model's error
+   shrinks each round, so the matches come closer to the truth and cover more of the overlap.
+
+A pair that cannot be registered is not an error: its record says why, and the views that no
+registered pair reaches stay unaligned (the caller decides what that means). Pure numpy/torch/OpenCV.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..pointmaps.base import Pointmap
+from ..scene import View
+from .chart import CylinderChart
+from .chart_shift import ChartPredictor, estimate_chart_shift
+from .epipolar import fundamental_inliers
+from .global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .guided import GuidedMatches, match_guided
+from .model_predictor import ModelPredictor
+from .texture import as_gray, estimate_ridge_period, ridge_texture
+
+__all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
+
+MATCHERS = ("surface", "minutiae", "sift", "rootsift", "akaze")
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """Settings of :func:`register_views`."""
+
+    matcher: str = "surface"
+    """First guess of each pair: ``surface`` (cylinder charts + guided ridge matching) or a classic
+    matcher of :mod:`fingersplat3d.align.features` (``minutiae``, ``sift``, ``rootsift``, ``akaze``)."""
+    guided_rounds: int = 2
+    """Rounds of model-guided matching and refinement after the first alignment (0 = none)."""
+    first_search: float = 2.0
+    """Search radius of the first guided matching through the charts, in ridge periods."""
+    guided_search: float = 0.7
+    """Search radius of the model-guided rounds, in ridge periods (below half a period to one side
+    of the prediction, a repeating ridge cannot be mistaken for its neighbour)."""
+    min_matches: int = 40
+    """Verified correspondences a pair needs to count as registered."""
+    epipolar_px: float = 0.1
+    """Fundamental-matrix inlier threshold, in ridge periods (at least 1 pixel)."""
+    global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
+    """The joint optimisation."""
+    seed: int = 0
+    """Seed of the random parts (RANSAC of the pair similarities)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """The aligned views and what happened to each pair."""
+
+    alignment: GlobalAlignment
+    pairs: list[dict]
+    """Per pair ``a``, ``b`` (names), ``ok``, ``reason``, the first guess (``turn_deg`` and its
+    votes for ``surface``), and per round the verified matches."""
+    period_px: float
+    rounds: int
+
+
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    textures: list[np.ndarray]
+    masks: list[np.ndarray]
+    grays: list[np.ndarray]
+    period: float
+
+
+def _prepare(views: Sequence[View]) -> _Prepared:
+    grays = [as_gray(view.image, f"view {view.name!r}") for view in views]
+    masks = [np.asarray(view.mask, bool) for view in views]
+    period = float(np.median([estimate_ridge_period(gray, mask) for gray, mask in zip(grays, masks)]))
+    textures = [ridge_texture(gray, mask, period) for gray, mask in zip(grays, masks)]
+    return _Prepared(textures, masks, grays, period)
+
+
+def _verified(matches: GuidedMatches, period: float, config: RegistrationConfig) -> GuidedMatches:
+    if len(matches) < config.min_matches:
+        return matches.subset(np.zeros(len(matches), bool))
+    _, inliers = fundamental_inliers(matches.uv_a, matches.uv_b, max(1.0, config.epipolar_px * period))
+    return matches.subset(inliers)
+
+
+def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, config: RegistrationConfig, record: dict) -> GuidedMatches:
+    shift = estimate_chart_shift(unwrapped[a], unwrapped[b], prepared.period)
+    if shift is None:
+        record["reason"] = "no patch of the unwrapped ridge textures correlates between the views"
+        return GuidedMatches.empty()
+    record.update(turn_deg=round(float(np.degrees(shift.turn)), 2), turn_votes=shift.support, turn_ratio=round(shift.ratio, 2))
+    if not shift.decisive:
+        record["reason"] = (f"the unwrapped ridge textures agree on no single turn ({shift.support} of {shift.patches} "
+                            f"patches at the best one, {shift.ratio:.2f} times the runner-up)")
+        return GuidedMatches.empty()
+    predictor = ChartPredictor(charts[a], charts[b], shift)
+    return match_guided(prepared.textures[a], prepared.masks[a], prepared.textures[b], prepared.masks[b], predictor,
+                        prepared.period, config.first_search * prepared.period)
+
+
+def _classic_guess(prepared: _Prepared, a: int, b: int, config: RegistrationConfig) -> GuidedMatches:
+    from .features import match_views
+
+    matches = match_views(prepared.grays[a], prepared.masks[a], prepared.grays[b], prepared.masks[b],
+                          method=config.matcher, densify=config.matcher == "minutiae", period_px=prepared.period)
+    identity = np.broadcast_to(np.eye(2), (len(matches), 2, 2)).copy()
+    return GuidedMatches(matches.uv_a, matches.uv_b, matches.score, identity, identity.copy())
+
+
+def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.ndarray) -> PairCorrespondences:
+    return PairCorrespondences(a, b, matches.uv_a, matches.uv_b, np.clip(matches.score, 1e-3, 1.0), b_to_a,
+                               matches.information_a, matches.information_b)
+
+
+def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config: RegistrationConfig = RegistrationConfig(),
+                   pairs: Sequence[tuple[int, int]] | None = None, progress=None) -> Registration:
+    """Align ``views`` (with masks) given their own-frame ``pointmaps`` (see the module docstring).
+
+    ``pairs``: the view pairs to try (default: all ``a < b``). ``progress``: an optional callable
+    taking a short text, told what the loop is doing.
+    """
+    from .pairwise import register_pair
+    from .features import Matches
+
+    say = progress or (lambda text: None)
+    n_views = len(views)
+    pairs = [(a, b) for a in range(n_views) for b in range(a + 1, n_views)] if pairs is None else list(pairs)
+    say("ridge texture")
+    prepared = _prepare(views)
+    records = {pair: {"a": views[pair[0]].name, "b": views[pair[1]].name, "ok": False, "reason": "", "matches": []}
+               for pair in pairs}
+    if config.matcher == "surface":
+        charts = [CylinderChart.from_mask(mask) for mask in prepared.masks]
+        step = max(1.0, prepared.period / 8.0)
+        unwrapped = [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, prepared.textures, prepared.masks)]
+    rng = np.random.default_rng(config.seed)
+    registered = []
+    for a, b in pairs:
+        say(f"first guess {views[a].name}-{views[b].name}")
+        record = records[(a, b)]
+        record["method"] = config.matcher
+        guess = (_surface_guess(prepared, a, b, charts, unwrapped, config, record) if config.matcher == "surface"
+                 else _classic_guess(prepared, a, b, config))
+        verified = _verified(guess, prepared.period, config)
+        record["matches"].append(len(verified))
+        if len(verified) < config.min_matches:
+            record["reason"] = record["reason"] or (f"only {len(verified)} of {len(guess)} matches agree on the epipolar "
+                                                    f"geometry; {config.min_matches} are needed")
+            continue
+        similarity = register_pair(pointmaps[a], pointmaps[b], Matches(verified.uv_a, verified.uv_b, verified.score, config.matcher),
+                                   rng=rng)
+        if not similarity.ok:
+            record["reason"] = f"the pointmaps do not fit one similarity: {similarity.reason}"
+            continue
+        registered.append(_pair_correspondences(a, b, verified, similarity.matrix))
+        record.update(ok=True, reason="")
+    depths = [pointmap.depth for pointmap in pointmaps]
+    focals = [pointmap.focal for pointmap in pointmaps]
+    say("global alignment")
+    alignment = global_align(depths, focals, registered, config.global_align)
+    rounds = 0
+    for _ in range(config.guided_rounds if registered else 0):
+        rounds += 1
+        refined = []
+        for a, b in pairs:
+            if not (alignment.aligned[a] and alignment.aligned[b]):
+                continue
+            say(f"guided round {rounds} {views[a].name}-{views[b].name}")
+            predictor = ModelPredictor.from_alignment(alignment, a, b)
+            matches = match_guided(prepared.textures[a], prepared.masks[a], prepared.textures[b], prepared.masks[b],
+                                   predictor, prepared.period, config.guided_search * prepared.period)
+            verified = _verified(matches, prepared.period, config)
+            record = records[(a, b)]
+            record["matches"].append(len(verified))
+            if len(verified) >= config.min_matches:
+                refined.append(_pair_correspondences(a, b, verified, np.eye(4)))
+                record.update(ok=True, reason="")
+            else:
+                record.update(ok=False, reason=f"only {len(verified)} of {len(matches)} matches through the 3D model agree "
+                                               f"on the epipolar geometry; {config.min_matches} are needed")
+        if not refined:
+            break
+        say(f"global alignment, round {rounds}")
+        alignment = global_align(depths, focals, refined, config.global_align, previous=alignment)
+    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds)

@@ -1,0 +1,22 @@
+"""Sampling an image or a map at sub-pixel positions (pixel centres at integer coordinates).
+
+Pure numpy/scipy: no Open3D, no files.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+__all__ = ["sample_bilinear"]
+
+
+def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``image [H, W]`` at ``uv [N, 2]`` (u right, v down): bilinear, NaN outside the image or next to a NaN pixel."""
+    image = np.asarray(image, np.float64)
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    height, width = image.shape
+    inside = np.isfinite(uv).all(1) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] <= height - 1)
+    values = np.full(len(uv), np.nan)
+    if inside.any():
+        values[inside] = map_coordinates(image, [uv[inside, 1], uv[inside, 0]], order=1, mode="nearest")
+    return values
