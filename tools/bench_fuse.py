@@ -10,7 +10,8 @@ Settings (rows), each fused with the default ``FuseConfig()`` unless it is an ab
   the most negative roll, the frontal ``p1`` and the one with the most positive roll, in that order
   (the paper picks the smallest and the two largest angles);
 * ``uwa3-1280``: uwa rig, 3 views, 1280x1024 (``--big-seeds`` seeds, default 3: the slow row);
-* ablations on ``uwa3-640`` (same captures): ``icp=True`` and ``dense_matches=False``.
+* ablations on ``uwa3-640`` (same captures): ``icp=True``, the ``minutiae`` matcher as the first guess
+  instead of ``surface``, and no guided rounds.
 
 The views handed to ``fuse`` keep the image and the ground-truth mask (as a ``fs3d synth`` capture
 folder ships them) and lose their camera and depth; the ground truth is used only to score:
@@ -65,11 +66,13 @@ SETTINGS = {
     "uwa3-1280": dict(label="uwa 3 views 1280x1024", synth="uwa-1280", views="all", fuse={}, big=True, ablation=False),
     "uwa3-640-icp": dict(label="uwa 3 views 640x512, ICP on", synth="uwa-640", views="all", fuse={"icp": True},
                            big=False, ablation=True),
-    "uwa3-640-nodense": dict(label="uwa 3 views 640x512, dense_matches off", synth="uwa-640", views="all",
-                             fuse={"dense_matches": False}, big=False, ablation=True),
+    "uwa3-640-minutiae": dict(label="uwa 3 views 640x512, minutiae matcher first", synth="uwa-640", views="all",
+                              fuse={"registration": {"matcher": "minutiae"}}, big=False, ablation=True),
+    "uwa3-640-noguided": dict(label="uwa 3 views 640x512, no guided rounds", synth="uwa-640", views="all",
+                              fuse={"registration": {"guided_rounds": 0}}, big=False, ablation=True),
 }
 FRONTAL = {"uwa": "center", "cfpose": "p1"}
-STAGES = ("pointmaps", "pairwise", "global_alignment", "icp", "fusion")
+STAGES = ("pointmaps", "registration", "icp", "fusion")
 
 # The targets
 TARGET_ROT_DEG = 2.0
@@ -137,6 +140,7 @@ def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
     import fingersplat3d.segment.masks  # noqa: F401
     from fingersplat3d.eval import depth_errors, relative_rotation_errors, translation_direction_errors
     from fingersplat3d.eval.poses import view_pairs
+    from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.pointmaps import get_backend
     from fingersplat3d.scene import Capture
@@ -144,7 +148,10 @@ def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
     rss_after_import = peak_rss_mib()
 
     setting = SETTINGS[key]
-    config = FuseConfig(**{"splat": None, **setting["fuse"]})  # geometry only; tools/bench_splat.py measures the fit
+    options = dict(setting["fuse"])
+    if "registration" in options:
+        options["registration"] = RegistrationConfig(**options["registration"])
+    config = FuseConfig(**{"splat": None, **options})  # geometry only; tools/bench_splat.py measures the fit
     captures = {}
     for seed in seeds:
         with open(folder / f"{setting['synth']}-{seed}.pkl", "rb") as handle:
@@ -317,7 +324,7 @@ def tables(results: list[dict], info: dict, args, wall_s: float, load_end) -> st
     ablations = [r for r in results if SETTINGS[r["key"]]["ablation"]]
 
     # --- accuracy ---
-    lines += ["## Accuracy (default `FuseConfig()`: backend `prior`, dense matches, ICP off)", "",
+    lines += ["## Accuracy (default `FuseConfig()`: backend `prior`, `surface` matcher, 2 guided rounds, ICP off)", "",
               "| setting | seeds (failed) | rot. err. median, all pairs (°) | adjacent pairs | median, adjacent (°) | "
               "median, outer pair (°) | max (°) | baseline dir. err. median (°) | depth MAE median (mm) | max (mm) | "
               "frontal median / max (mm) | oblique median / max (mm) | pairs registered | alignment ok | "

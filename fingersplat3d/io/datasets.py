@@ -3,8 +3,9 @@
 Loaded captures have no cameras and no depth; masks only where the layout has them. Images keep
 what the file holds (grayscale stays ``H x W``) unless ``gray`` says otherwise.
 
-* **UWA 3D/2D** raw frames, ``{subject}_{finger}_{capture}_{frame}.jpg`` (1280x1024, 8-bit gray;
-  ids alphanumeric). Frames 0-2 are the three simultaneous views under plain light and become
+* **UWA 3D/2D** raw frames, ``{subject}_{finger}_{capture}_{session}_{frame}.jpg`` as the database
+  names them (``2_2_7_1_0.jpg``), or without the session, ``{subject}_{finger}_{capture}_{frame}.jpg``
+  (1280x1024, 8-bit gray, a camera sometimes stored portrait; ids alphanumeric). Frames 0-2 are the three simultaneous views under plain light and become
   the views ``f0, f1, f2`` of one capture per ``(subject, finger, capture)``; frames 3-5 are the
   same cameras under structured light, skipped unless ``structured_light=True`` (then views
   ``f3, f4, f5`` follow). Frames above 5 are ignored.
@@ -36,7 +37,8 @@ __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_gro
 
 UWA_VIEW_FRAMES = (0, 1, 2)
 UWA_STRUCTURED_FRAMES = (3, 4, 5)
-_UWA_NAME = re.compile(r"^(?P<subject>[A-Za-z0-9]+)_(?P<finger>[A-Za-z0-9]+)_(?P<capture>[A-Za-z0-9]+)_(?P<frame>\d+)$")
+_UWA_NAME = re.compile(r"^(?P<subject>[A-Za-z0-9]+)_(?P<finger>[A-Za-z0-9]+)_(?P<capture>[A-Za-z0-9]+)"
+                       r"(?:_(?P<session>[A-Za-z0-9]+))?_(?P<frame>\d+)$")
 _CFPOSE_NAME = re.compile(r"^(?P<finger>[A-Za-z0-9-]+)_(?P<pose>\d+)$")
 _CFPOSE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 _MASK_SUFFIX = "_mask"
@@ -96,11 +98,18 @@ class UWAGroup:
     subject: str
     finger: str
     capture: str
+    session: str | None
     frames: dict[int, Path]
 
     @property
     def label(self) -> str:
-        return f"subject {self.subject}, finger {self.finger}, capture {self.capture}"
+        return f"subject {self.subject}, finger {self.finger}, capture {self.capture}" + (
+            f", session {self.session}" if self.session is not None else "")
+
+    @property
+    def stem(self) -> str:
+        """The shared part of the frame names (``2_2_7_1`` for ``2_2_7_1_0.jpg``)."""
+        return "_".join(part for part in (self.subject, self.finger, self.capture, self.session) if part is not None)
 
 
 def find_uwa_groups(folder_or_files: str | Path | Iterable[str | Path], subject: object = None,
@@ -111,7 +120,7 @@ def find_uwa_groups(folder_or_files: str | Path | Iterable[str | Path], subject:
     is an ``InputError``. Two files for the same frame are an error too.
     """
     files, where = _image_files(folder_or_files, recursive=True)
-    groups: dict[tuple[str, str, str], dict[int, Path]] = {}
+    groups: dict[tuple[str, str, str, str | None], dict[int, Path]] = {}
     matched = 0
     for path in files:
         match = _UWA_NAME.match(path.stem)
@@ -121,7 +130,7 @@ def find_uwa_groups(folder_or_files: str | Path | Iterable[str | Path], subject:
         if not (_same_id(subject, match["subject"]) and _same_id(finger, match["finger"])
                 and _same_id(capture, match["capture"])):
             continue
-        frames = groups.setdefault((match["subject"], match["finger"], match["capture"]), {})
+        frames = groups.setdefault((match["subject"], match["finger"], match["capture"], match["session"]), {})
         frame = int(match["frame"])
         if frame in frames:
             raise input_error(path, f"frame {frame} of this UWA capture is also in {frames[frame]}")
@@ -130,7 +139,7 @@ def find_uwa_groups(folder_or_files: str | Path | Iterable[str | Path], subject:
         raise input_error(where, "no files named like UWA frames ({subject}_{finger}_{capture}_{frame}.jpg)")
     if not groups:
         raise input_error(where, f"no UWA frames match subject={subject}, finger={finger}, capture={capture}")
-    ordered = sorted(groups, key=lambda key: tuple(natural_key(part) for part in key))
+    ordered = sorted(groups, key=lambda key: tuple(natural_key(part or "") for part in key))
     return [UWAGroup(*key, frames=groups[key]) for key in ordered]
 
 
@@ -149,12 +158,13 @@ def load_uwa(folder_or_files: str | Path | Iterable[str | Path], subject: object
         for frame in wanted:
             if frame not in group.frames:
                 some = next(iter(group.frames.values()))
-                expected = some.with_name(f"{group.subject}_{group.finger}_{group.capture}_{frame}{some.suffix}")
+                expected = some.with_name(f"{group.stem}_{frame}{some.suffix}")
                 raise input_error(expected, f"UWA {group.label} is missing frame {frame}")
         paths = [group.frames[frame] for frame in wanted]
         images = _read_views(paths, gray)
         names = [f"f{frame}" for frame in wanted]
         metadata = {"dataset": "uwa", "subject": group.subject, "finger": group.finger, "capture": group.capture,
+                    "session": group.session, "name": group.stem,
                     "sources": {name: str(path) for name, path in zip(names, paths)},
                     "lighting": {name: "plain" if frame in UWA_VIEW_FRAMES else "structured"
                                  for name, frame in zip(names, wanted)}}
