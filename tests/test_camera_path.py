@@ -34,7 +34,7 @@ def assert_same_camera(a: Camera, b: Camera, atol: float = 1e-6) -> None:
 
 
 def test_rig_geometry_of_the_uwa_rig():
-    cameras = [view.camera for view in uwa_rig(PARAMS, SIZE)]
+    cameras = [view.camera for view in ring_rig(PARAMS, (-45.0, 0.0, 45.0), SIZE)]
     rig = rig_geometry(cameras)
     assert np.allclose(rig.axis, TRUE_AXIS, atol=1e-9)
     assert np.allclose(rig.angles_deg, [-45.0, 0.0, 45.0], atol=1e-9)
@@ -45,8 +45,16 @@ def test_rig_geometry_of_the_uwa_rig():
         assert np.linalg.norm(offset - (offset @ direction) * direction) < 1e-9
 
 
-def test_arc_of_twelve_covers_the_rig_in_equal_steps():
+def test_uwa_rig_points_the_tip_left_and_keeps_left_to_right_order():
+    # UWA's raw frames show the tip to the left: image right is -x, and "left" is the leftmost camera.
     cameras = [view.camera for view in uwa_rig(PARAMS, SIZE)]
+    rig = rig_geometry(cameras)
+    assert np.allclose(rig.axis, -TRUE_AXIS, atol=1e-9) and list(rig.order) == [0, 1, 2]
+    assert np.allclose(rig.angles_deg, [-45.0, 0.0, 45.0], atol=1e-9)
+
+
+def test_arc_of_twelve_covers_the_rig_in_equal_steps():
+    cameras = [view.camera for view in ring_rig(PARAMS, (-45.0, 0.0, 45.0), SIZE)]
     arc = arc_cameras(cameras, 12)
     assert len(arc) == 12
     angles = np.array([angle_about_axis(camera, cameras[1]) for camera in arc])

@@ -135,23 +135,24 @@ def test_synthetic_pointmaps(rig, seed):
         interior = pointmap.confidence == 1.0
         rim = mask & (pointmap.confidence < 0.2)
         assert np.median(pointmap.depth[interior]) < np.median(pointmap.depth[rim])
-        # Accuracy, relative to the relief itself (the flat baseline's error). Measured (uwa seeds
-        # 0-5, cfpose 0-3 at 640 px; these seeds at 320 px; tools/bench_prior.py for the mm table):
-        # * after scale and shift: 0.07-0.18 of the flat error on frontal views, 0.11-0.38 on uwa
-        #   45-degree views; pitched and rolled cfpose views reach 0.88, a ramp that no silhouette
+        # Accuracy, relative to the relief itself (the flat baseline's error). Measured on the
+        # generator's wide range of shapes (sections 0.68-0.95 high, bulbous pads; uwa and cfpose
+        # seeds 0-5 at 320 px), where the prior's one fixed section is only a first guess:
+        # * after scale and shift: 0.14-0.44 of the flat error on frontal views, 0.09-0.57 on uwa
+        #   45-degree views; pitched and rolled cfpose views reach 0.81, a ramp that no silhouette
         #   shows (so no bound there);
-        # * once that ramp (a plane in u, v) is fitted too: <= 0.03 frontal, <= 0.12 everywhere.
-        # The bounds leave a ~1.6-2x margin; a wrong cross-section (the distance-transform tent,
+        # * once that ramp (a plane in u, v) is fitted too: <= 0.13 frontal, <= 0.18 everywhere.
+        # The bounds leave a ~1.3-1.5x margin; a wrong cross-section (the distance-transform tent,
         # ~0.4 of the flat error after the tilt fit) fails them.
         flat = aligned_errors(np.where(mask, 1.0, np.nan), gt, mask)
         flat_tilt = aligned_errors(np.where(mask, 1.0, np.nan), gt, mask, tilt=True)
         error = aligned_errors(pointmap.depth, gt, mask)
         error_tilt = aligned_errors(pointmap.depth, gt, mask, tilt=True)
-        assert error_tilt < 0.2 * flat_tilt, (view.name, error_tilt, flat_tilt)
+        assert error_tilt < 0.25 * flat_tilt, (view.name, error_tilt, flat_tilt)
         if view.name in ("center", "p1"):
-            assert error < 0.35 * flat and error_tilt < 0.06 * flat_tilt, (view.name, error, flat)
+            assert error < 0.6 * flat and error_tilt < 0.2 * flat_tilt, (view.name, error, flat)
         elif rig == "uwa":
-            assert error < 0.6 * flat, (view.name, error, flat)
+            assert error < 0.75 * flat, (view.name, error, flat)
 
 
 def test_own_segmentation_matches_given_mask():

@@ -25,7 +25,8 @@ DEFAULT_PERIOD_PX = 8.0
 """Period returned when no ridge peak stands out (a featureless image)."""
 _TILE = 96  # pixels per side of a spectrum tile (several ridge periods at any usual resolution)
 _FFT = 256  # padded size of the tile spectrum (frequency resolution)
-_MIN_PEAK_CONTRAST = 4.0  # a tile's peak must stand this far above its band's mean power
+_MIN_PEAK_CONTRAST = 4.0
+RIDGE_AREA_WIDTHS = 1.4  # a tile's peak must stand this far above its band's mean power
 
 
 def as_gray(image: np.ndarray, name: str = "image") -> np.ndarray:
@@ -63,6 +64,7 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
     rows, cols = np.nonzero(mask)
     if rows.size == 0:
         return DEFAULT_PERIOD_PX
+    mask = _ridge_area(mask)
     extent = min(int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1)
     margin = int(min(max_period, 0.1 * extent))  # off the silhouette's edge, where shading drops
     inner = mask if mask.all() or margin < 1 else cv2.erode(mask.astype(np.uint8), np.ones((2 * margin + 1,) * 2, np.uint8)) > 0
@@ -99,6 +101,28 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
     order = np.argsort(periods)
     cumulative = np.cumsum(np.asarray(weights)[order])
     return float(np.asarray(periods)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+
+
+def _ridge_area(mask: np.ndarray) -> np.ndarray:
+    """The part of a finger mask where ridges are: within ``RIDGE_AREA_WIDTHS`` finger widths of the tip.
+
+    Friction ridges cover the distal phalanx up to its crease, ~1.4-1.8 widths from the tip;
+    behind it, skin creases and wrinkles have periods of their own that would outvote the ridges
+    on a finger photographed far back. The whole mask when no tip is found (no border cuts one end).
+    """
+    from ..segment.silhouette import silhouette_frame
+
+    if mask.all() or mask.sum() < 64:
+        return mask
+    frame = silhouette_frame(mask)
+    if not frame.tip_found:
+        return mask
+    rows, cols = np.nonzero(mask)
+    s, _ = frame.coordinates(np.stack([cols, rows], 1).astype(np.float64))
+    width = 2.0 * float(np.median(frame.sections.half_width))
+    area = np.zeros_like(mask)
+    area[rows, cols] = (frame.s_tip - s) < RIDGE_AREA_WIDTHS * width
+    return area
 
 
 def _parabola(left: float, centre: float, right: float) -> float:

@@ -42,6 +42,8 @@ class SynthConfig:
     """Skin and sensor; ``rgb`` is forced on for cfpose unless ``gray`` is set."""
     gray: bool | None = None
     """Force grayscale (True) or RGB (False); default: uwa/ring gray, cfpose RGB."""
+    finger_pose: bool = True
+    """uwa rig: lay the finger in the rig as a hand does (random roll, pitch, yaw and shift), not on its axis."""
     mesh_detail: float = 1.0
     """Scale of the surface grid (1.0: 180+80 rows x 240 columns, ~62k vertices). The depth maps are
     exact for whatever mesh is used, and that mesh is the one exported; smaller ships smaller files."""
@@ -100,7 +102,7 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     clock = time.perf_counter()
     size = tuple(config.size) if config.size else DEFAULT_SIZES[config.rig]
     if config.rig == "uwa":
-        rig = uwa_rig(params, size, config.focal)
+        rig = uwa_rig(params, size, config.focal, np.random.default_rng(rng.integers(2**63)) if config.finger_pose else None)
     elif config.rig == "ring":
         rig = ring_rig(params, config.angles, size, config.focal)
     else:

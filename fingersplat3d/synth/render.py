@@ -7,8 +7,14 @@ and tangents are interpolated. The ridge pattern is then a texture in skin coord
 
 * albedo: skin tone with low-frequency variation; valleys darker than ridges (cavity term);
 * relief: the ridge field as a height map bumps the shading normal (ridge relief shading);
-* light: Lambertian with ambient, optional Blinn-Phong highlight (stronger on ridge crests);
-* sensor: slight Gaussian blur and Gaussian noise; dark background.
+* light: Lambertian with ambient, optional Blinn-Phong highlight (stronger on ridge crests), and
+  glints: sparse bright specks fixed on the skin (sweat pores) that light up where their
+  highlight faces the camera, so they differ between views as on real skin;
+* sensor: Gaussian blur and Gaussian noise; dark background.
+
+The defaults are matched to the real UWA captures by the statistics of
+:mod:`fingersplat3d.eval.appearance` (``tools/bench_realism.py``, README): faint ridges, soft
+optics, low sensor noise, glints.
 
 The geometry is not displaced by the ridges (relief of a few hundredths of a mm), so the depth is
 the exact depth of the ground-truth mesh that is written next to the images.
@@ -27,6 +33,8 @@ from .shape import FingerSurface
 __all__ = ["Appearance", "Rendering", "FingerScene", "skin_weight"]
 
 _LUMA = np.array([0.299, 0.587, 0.114])
+GLINTS_PER_MM2 = 1.0
+WRINKLES = 24  # plane waves of the fine skin texture
 
 
 @dataclass(frozen=True)
@@ -39,25 +47,30 @@ class Appearance:
     """Mean skin albedo (RGB); grayscale uses its luminance."""
     albedo_variation: float = 0.08
     """Relative amplitude of the low-frequency albedo blotches."""
-    ridge_contrast: float = 0.35
+    ridge_contrast: float = 0.18
     """How much darker valleys are than ridge crests (cavity / ambient-occlusion term)."""
-    relief_mm: float = 0.02
+    relief_mm: float = 0.012
     """Ridge height used to bump the shading normal (half of crest-to-valley)."""
     ambient: float = 0.3
     """Share of light that is ambient (not direction dependent)."""
     specular: float = 0.12
     """Strength of the Blinn-Phong highlight (0 for none)."""
+    glints: float = 0.35
+    """Strength of the glints on the skin (0 for none)."""
+    wrinkles: float = 0.06
+    """Relative amplitude of the fine skin texture (creases and wrinkles 0.3-1 mm across), everywhere on the
+    skin, beyond the crease too, as on real fingers (0 for none)."""
     shininess: float = 24.0
     """Blinn-Phong exponent."""
     crease_depth: float = 0.35
     """Darkening of the distal interphalangeal crease (0 for none)."""
-    exposure: float = 1.0
+    exposure: float = 0.9
     """Global gain."""
-    background: float = 0.03
+    background: float = 0.02
     """Background intensity (dark by default)."""
-    blur_px: float = 0.6
+    blur_px: float = 2.0
     """Gaussian blur sigma in pixels (optics); 0 for none."""
-    noise: float = 0.012
+    noise: float = 0.006
     """Gaussian sensor noise sigma; 0 for none."""
 
 
@@ -108,6 +121,16 @@ class FingerScene:
         self._blotch_k = blotch_rng.normal(size=(6, 3)) * (2 * np.pi / blotch_rng.uniform(3.0, 12.0, size=(6, 1)))
         self._blotch_phase = blotch_rng.uniform(0, 2 * np.pi, size=6)
         self._blotch_tint = blotch_rng.normal(0.0, 0.35, size=(6, 3))
+        # Glints: specks at random places of the skin (GLINTS_PER_MM2), ~2 grid cells across.
+        cells = pattern.ridges.shape
+        count = int(GLINTS_PER_MM2 * cells[0] * cells[1] * pattern.spacing_mm ** 2)
+        specks = np.zeros(cells, np.float32)
+        specks[blotch_rng.integers(0, cells[0], count), blotch_rng.integers(0, cells[1], count)] = blotch_rng.uniform(0.5, 1.0, count)
+        self._glints = cv2.GaussianBlur(specks, (0, 0), 0.8) * 8.0
+        directions = blotch_rng.normal(size=(WRINKLES, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        self._wrinkle_k = directions * (2 * np.pi / blotch_rng.uniform(0.3, 1.0, size=(WRINKLES, 1)))
+        self._wrinkle_phase = blotch_rng.uniform(0, 2 * np.pi, size=WRINKLES)
 
     def cast(self, camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Depth ``[H, W]`` (NaN = miss), triangle ids ``[H, W]`` and barycentrics ``[H, W, 2]``."""
@@ -150,10 +173,14 @@ class FingerScene:
         cavity = 1.0 - appearance.ridge_contrast * 0.5 * (1.0 - height)
         blotch = np.sin(points @ self._blotch_k.T + self._blotch_phase)  # [N, 6]
         albedo = np.asarray(appearance.albedo)[None] * (1.0 + appearance.albedo_variation * (blotch @ (1 + self._blotch_tint)) / 3)
+        wrinkle = np.cos(points @ self._wrinkle_k.T + self._wrinkle_phase).sum(-1) / np.sqrt(WRINKLES / 2)
+        albedo = albedo * (1.0 + appearance.wrinkles * np.tanh(wrinkle))[:, None]
         crease = 1.0 - appearance.crease_depth * np.exp(-(((ab[:, 0] - surface.params.crease) / 0.35) ** 2))
         shade = (appearance.ambient + (1 - appearance.ambient) * diffuse) * cavity * crease
         crest = 0.5 + 0.25 * (height + 1.0)
-        color = appearance.exposure * (albedo * shade[:, None] + appearance.specular * (highlight * crest)[:, None])
+        glint = self.pattern.sample(ab[:, 0], ab[:, 1], self._glints) * weight * np.clip((bumped * half).sum(-1), 0.0, None) ** 6
+        color = appearance.exposure * (albedo * shade[:, None] + appearance.specular * (highlight * crest)[:, None]
+                                       + appearance.glints * glint[:, None])
         if not appearance.rgb:
             color = color @ _LUMA[:, None]
         channels = color.shape[1]

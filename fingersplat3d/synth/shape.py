@@ -45,22 +45,27 @@ class FingerParams:
     """Palmward sag of the axis over the modelled length (mm)."""
     crease: float = 26.0
     """Distance of the distal interphalangeal crease from the tip, along the pad: where ridges end."""
+    pad_bulge: float = 0.0
+    """Extra fullness of the pad behind the tip (relative, peaking one cap length from the pole):
+    real fingertips are bulbous there, wider and deeper on the pad side than the body behind."""
     tip_x: float = 12.0
     """World x of the tip pole."""
 
 
 def random_finger_params(rng: np.random.Generator) -> FingerParams:
-    """Random adult finger within human ranges."""
-    width = rng.uniform(14.0, 20.0)
+    """Random adult finger, drawn wide across human ranges (thumbs to little fingers, slim to
+    bulbous): the reconstruction must not depend on one shape."""
+    width = rng.uniform(13.0, 22.0)
     return FingerParams(
         width=width,
-        height_ratio=rng.uniform(0.76, 0.88),
-        pad_share=rng.uniform(0.53, 0.6),
-        nail_flatness=rng.uniform(2.6, 3.8),
-        cap=width * rng.uniform(0.5, 0.62),
-        taper=rng.uniform(0.04, 0.14),
-        bend=rng.uniform(0.2, 1.4),
-        crease=width * rng.uniform(1.45, 1.7),
+        height_ratio=rng.uniform(0.68, 0.95),
+        pad_share=rng.uniform(0.5, 0.66),
+        nail_flatness=rng.uniform(2.0, 4.5),
+        cap=width * rng.uniform(0.42, 0.7),
+        taper=rng.uniform(0.0, 0.2),
+        bend=rng.uniform(0.0, 2.5),
+        crease=width * rng.uniform(1.4, 1.8),
+        pad_bulge=rng.uniform(0.0, 0.18),
     )
 
 
@@ -175,10 +180,14 @@ def make_finger_surface(params: FingerParams, body_rows: int = 180, cap_rows: in
     section = _section(phi, params)  # [C, 2]
     # Axis sags palmward (-z) toward the tip; base at x = 0 in local coordinates.
     sag = -params.bend * (x / params.length) ** 2
+    # The pad bulge: the pad half grows around one cap length behind the pole (a smooth bump along x).
+    bump = params.pad_bulge * np.exp(-0.5 * ((x - (params.length - params.cap)) / (0.6 * params.cap)) ** 2)
+    pad_side = np.clip(-section[:, 1] / max(params.height_ratio * params.pad_share, 1e-9), 0.0, 1.0)  # 1 at the pad centre
+    grow = 1.0 + bump[:, None] * pad_side[None, :]
     grid = np.empty((x.size, cols, 3))
     grid[..., 0] = x[:, None]
-    grid[..., 1] = width[:, None] * section[None, :, 0]
-    grid[..., 2] = width[:, None] * section[None, :, 1] + sag[:, None]
+    grid[..., 1] = width[:, None] * section[None, :, 0] * (1.0 + 0.5 * (grow - 1.0))
+    grid[..., 2] = width[:, None] * section[None, :, 1] * grow + sag[:, None]
     pole = np.array([params.length, 0.0, -params.bend])  # the sag at x = length
     base_centre = np.array([0.0, 0.0, 0.0])
     offset = np.array([params.tip_x - params.length, 0.0, 0.0])
