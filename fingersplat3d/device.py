@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import math
 import os
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import torch
 
 from .errors import InputError
 
-__all__ = ["resolve_device", "cpu_threads"]
+__all__ = ["resolve_device", "cpu_threads", "single_threaded"]
 
 
 def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
@@ -61,3 +63,20 @@ def cpu_threads() -> int:
     if quota is not None:
         cores = min(cores, max(1, math.floor(quota)))
     return max(1, cores)
+
+
+@contextmanager
+def single_threaded() -> Iterator[None]:
+    """Torch and OpenCV on one thread for the duration: for many small operations (an L-BFGS loop
+    over a few thousand residuals, per-patch matching), where worker threads only add hand-offs
+    and, beside another busy process, spin on the cores that process needs."""
+    import cv2
+
+    torch_threads, cv_threads = torch.get_num_threads(), cv2.getNumThreads()
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(torch_threads)
+        cv2.setNumThreads(cv_threads)

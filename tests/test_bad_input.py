@@ -323,3 +323,86 @@ def test_unwritable_inputs_are_refused_before_writing(tmp_path):
     inf_depth = Capture((capture.views[0].with_(depth=np.full((H, W), np.inf, np.float32)),))
     raises_naming("out", write_capture, inf_depth, tmp_path / "out")
     assert leftovers(tmp_path) == []
+
+
+# ------------------------------------------------------------------------------ fs3d fuse: failures said once
+
+def _stderr_lines(text: str) -> list[str]:
+    """What a terminal shows last: progress-bar redraws (carriage returns) split like new lines."""
+    return [line for line in text.replace("\r", "\n").splitlines() if line.strip()]
+
+
+def _write_views(folder, views):
+    folder.mkdir()
+    for view in views:
+        cv2.imwrite(str(folder / f"{view.name}.png"), np.clip(view.image * 255, 0, 255).astype(np.uint8))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def two_fingers(tmp_path_factory):
+    from fingersplat3d.synth import SynthConfig, synthesize
+
+    a = synthesize(1, SynthConfig(size=(320, 256))).capture["center"]
+    b = synthesize(4, SynthConfig(size=(320, 256))).capture["left"].with_(name="other")
+    return _write_views(tmp_path_factory.mktemp("fingers") / "two", [a, b])
+
+
+def test_views_that_cannot_be_registered_exit_3_with_outputs_written(two_fingers, tmp_path, capsys):
+    from fingersplat3d.cli import main
+    from fingersplat3d.errors import EXIT_NOT_REGISTERED
+
+    out = tmp_path / "rec"
+    assert main(["fuse", str(two_fingers), "-o", str(out), "--no-splat"]) == EXIT_NOT_REGISTERED
+    last = _stderr_lines(capsys.readouterr().err)[-1]
+    assert last.startswith("fs3d fuse: view(s) other could not be registered") and "Traceback" not in last
+    report = json.loads((out / "report.json").read_text())
+    assert report["alignment"]["ok"] is False and report["alignment"]["not_registered"] == ["other"]
+    assert (out / "fused.ply").is_file() and (out / "cameras.json").is_file()
+
+
+def test_one_view_says_there_is_nothing_to_align(two_fingers, tmp_path, capsys):
+    from fingersplat3d.cli import main
+
+    assert main(["fuse", str(two_fingers / "center.png"), "-o", str(tmp_path / "one"), "--no-splat"]) == 0
+    out = capsys.readouterr().out
+    assert "one view: nothing to align" in out and "nan" not in out
+
+
+@pytest.mark.parametrize("option, value", [("--alignment-iterations", "-5"), ("--guided-rounds", "1.5"),
+                                           ("--splat-iterations", "-1"), ("--px-per-mm", "nan"),
+                                           ("--finger-width-mm", "-3"), ("--pair-batch", "0")])
+def test_numeric_options_are_range_checked_in_one_sentence(two_fingers, tmp_path, capsys, option, value):
+    from fingersplat3d.cli import main
+
+    assert main(["fuse", str(two_fingers), "-o", str(tmp_path / "x"), option, value]) == 2
+    lines = _stderr_lines(capsys.readouterr().err)
+    assert len(lines) == 1 and option in lines[0] and not (tmp_path / "x").exists()
+
+
+def test_an_error_inside_fuse_is_the_last_line_not_mixed_into_the_progress_bar(two_fingers, tmp_path, capsys):
+    from fingersplat3d.cli import main
+
+    cv2.imwrite(str(two_fingers.parent / "black.png"), np.zeros((256, 320), np.uint8))
+    inputs = [str(two_fingers / "center.png"), str(two_fingers.parent / "black.png")]
+    assert main(["fuse", *inputs, "-o", str(tmp_path / "x"), "--no-splat"]) == 2
+    lines = _stderr_lines(capsys.readouterr().err)
+    assert lines[-1].startswith("fs3d fuse: error:") and "no finger found" in lines[-1]
+    assert "fs3d fuse: error" not in " ".join(lines[:-1]) and not (tmp_path / "x").exists()
+
+
+def test_a_backend_without_points_on_the_finger_is_one_sentence(two_fingers):
+    from fingersplat3d.pipeline import FuseConfig, fuse
+    from fingersplat3d.pointmaps import register_backend
+    from fingersplat3d.pointmaps.base import Pointmap
+    from fingersplat3d.io.datasets import load_image_folder
+
+    class Empty:
+        name = "empty"
+
+        def predict_views(self, views):
+            return [Pointmap(i, np.full(v.image.shape[:2] + (3,), np.nan, np.float32), np.zeros(v.image.shape[:2], np.float32), 100.0)
+                    for i, v in enumerate(views)]
+
+    register_backend("empty", Empty)
+    raises_naming("gave no finite 3D point on the finger", fuse, load_image_folder(two_fingers), FuseConfig(backend="empty", splat=None))

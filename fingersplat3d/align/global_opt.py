@@ -28,6 +28,7 @@ import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
 
+from ..device import single_threaded
 from ..sampling import sample_bilinear
 from .alignment_problem import AlignmentProblem, Correspondences, InitialState
 from .depth_field import FieldGrid
@@ -210,8 +211,9 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
                                focal_prior=config.focal_prior)
-    history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
-                       config.polish_rounds) if len(data.weight) else []
+    with single_threaded():  # a few thousand residuals: threads only add hand-offs
+        history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
+                           config.polish_rounds) if len(data.weight) else []
     return _result(problem, depths, grids, data, root, tree, aligned, history)
 
 

@@ -27,7 +27,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..device import cpu_threads
+from ..device import cpu_threads, single_threaded
 
 __all__ = ["GuidedMatches", "Predictor", "predict_with_jacobian", "match_guided", "structure_information"]
 
@@ -153,7 +153,8 @@ def match_guided(texture_a: np.ndarray, mask_a: np.ndarray, texture_b: np.ndarra
     exclusion = max(2, int(round(0.6 * period)))
     texture_a = np.asarray(texture_a, np.float32)
     texture_b = np.asarray(texture_b, np.float32)
-    with ThreadPoolExecutor(cpu_threads()) as pool:  # OpenCV releases the GIL in each call
+    # Patches in parallel on the process's threads (OpenCV releases the GIL), OpenCV itself on one each.
+    with single_threaded(), ThreadPoolExecutor(cpu_threads()) as pool:
         results = list(pool.map(lambda i: _match_one(texture_a, texture_b, grid[i], prediction[i], jacobian[i], half,
                                                      search, exclusion), index))
     uv_b = np.array([r[0] for r in results]).reshape(-1, 2)

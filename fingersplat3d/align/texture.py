@@ -26,7 +26,8 @@ DEFAULT_PERIOD_PX = 8.0
 _TILE = 96  # pixels per side of a spectrum tile (several ridge periods at any usual resolution)
 _FFT = 256  # padded size of the tile spectrum (frequency resolution)
 _MIN_PEAK_CONTRAST = 4.0
-RIDGE_AREA_WIDTHS = 1.4  # a tile's peak must stand this far above its band's mean power
+RIDGE_AREA_WIDTHS = 1.4
+RMS_FLOOR = 1e-3  # intensity: below this local band RMS there is no texture to normalise (a quarter grey level)  # a tile's peak must stand this far above its band's mean power
 
 
 def as_gray(image: np.ndarray, name: str = "image") -> np.ndarray:
@@ -130,27 +131,36 @@ def _parabola(left: float, centre: float, right: float) -> float:
     return float(np.clip(0.5 * (left - right) / denominator, -0.5, 0.5)) if denominator < 0 else 0.0
 
 
-def suppress_glints(gray: np.ndarray, mask: np.ndarray, sigmas: float = 4.0) -> np.ndarray:
-    """``gray`` with specks brighter than the 5x5 median by ``sigmas`` robust deviations replaced by it."""
+def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor: float = 4.0) -> np.ndarray:
+    """``gray`` with specular specks replaced by the surrounding skin.
+
+    A glint is smaller than a ridge: it is what a grey opening with a disc of ``radius`` removes
+    (the top-hat), by more than ``factor`` times the local RMS of the top-hat (the shaving every
+    ridge crest gets), and more than the sensor noise could. Ridges stay as they are.
+    """
     gray = np.asarray(gray, np.float32)
-    median = cv2.medianBlur(gray, 5)
-    excess = gray - median
-    inside = excess[mask]
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)
+    opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, disc)
+    top_hat = gray - opened
+    inside = top_hat[mask]
     if inside.size < 16:
         return gray
-    spread = 1.4826 * float(np.median(np.abs(inside - np.median(inside)))) + 1e-6
-    glint = cv2.dilate(((excess > sigmas * spread) & mask).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    return np.where(glint, median, gray)
+    local = np.sqrt(cv2.GaussianBlur(top_hat * top_hat, (0, 0), 6.0 * (radius + 1)))
+    noise = 1.4826 * float(np.median(np.abs(inside - np.median(inside))))
+    inner = cv2.erode(np.asarray(mask, np.uint8), disc, iterations=2) > 0  # the outline's step is no glint
+    glint = (top_hat > factor * np.maximum(local, noise)) & inner
+    glint = cv2.dilate(glint.astype(np.uint8), disc) > 0
+    return np.where(glint, opened, gray)
 
 
 def ridge_texture(gray: np.ndarray, mask: np.ndarray, period: float) -> np.ndarray:
     """Band-passed ridge texture ``[H, W]`` float32 with unit local RMS inside ``mask``, 0 outside."""
     weight = np.asarray(mask, np.float32)
-    clean = suppress_glints(gray, np.asarray(mask, bool)) * weight
+    clean = suppress_glints(gray, np.asarray(mask, bool), radius=max(1, int(round(period / 12)))) * weight
 
     def inside_blur(values: np.ndarray, sigma: float) -> np.ndarray:
         return cv2.GaussianBlur(values * weight, (0, 0), sigma) / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigma), 1e-3)
 
     band = (inside_blur(clean, 0.18 * period) - inside_blur(clean, 0.6 * period)) * weight
-    rms = np.sqrt(inside_blur(band * band, period) + 1e-8)
+    rms = np.sqrt(inside_blur(band * band, period) + RMS_FLOOR ** 2)
     return (band / rms * weight).astype(np.float32)

@@ -1,0 +1,64 @@
+"""Cylinder charts and the turn between two views voted from their unwrapped ridge textures."""
+import numpy as np
+import pytest
+
+from fingersplat3d.align.chart import CylinderChart
+from fingersplat3d.align.chart_shift import estimate_chart_shift
+from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+from fingersplat3d.eval.poses import rotation_angle_deg
+from fingersplat3d.synth import SynthConfig, synthesize
+
+
+def capsule(rows=160, cols=400, radius=50, tip=80):
+    """A horizontal capsule cut by the right border, tip to the left."""
+    v, u = np.mgrid[:rows, :cols]
+    return ((np.abs(v - rows // 2) <= radius) & (u >= tip)) | ((u - tip) ** 2 + (v - rows // 2) ** 2 <= radius ** 2)
+
+
+def test_chart_finds_the_tip_and_inverts_itself():
+    chart = CylinderChart.from_mask(capsule())
+    assert chart.frame.tip_found and chart.frame.axis[0] < -0.99  # the tip is at the left
+    rng = np.random.default_rng(0)
+    sigma, theta = rng.uniform(60, 250, 200), rng.uniform(-1.2, 1.2, 200)
+    back_sigma, back_theta = chart.surface(chart.pixels(sigma, theta))
+    np.testing.assert_allclose(back_sigma, sigma, atol=1e-9)
+    np.testing.assert_allclose(back_theta, theta, atol=1e-6)
+    assert chart.radius == pytest.approx(50.5, abs=1.0)
+
+
+def test_unwrapped_grid_is_centred_on_the_line_of_sight():
+    mask = capsule()
+    chart = CylinderChart.from_mask(mask)
+    unwrapped = chart.unwrap(mask.astype(np.float32), mask, step=2.0)
+    middle = (unwrapped.image.shape[0] - 1) / 2
+    assert unwrapped.angle(middle) == 0.0 and unwrapped.valid[int(middle)].sum() > 0.6 * unwrapped.valid.shape[1]
+    assert not unwrapped.valid[0].any() and not unwrapped.valid[-1].any()  # beyond 75 degrees: left out
+
+
+@pytest.fixture(scope="module")
+def finger():
+    return synthesize(3, SynthConfig(size=(640, 512))).capture
+
+
+def _unwrapped(view, period):
+    chart = CylinderChart.from_mask(view.mask)
+    return chart.unwrap(ridge_texture(view.image, view.mask, period), view.mask, max(1.0, period / 8))
+
+
+def test_turn_between_views_45_degrees_apart_is_found(finger):
+    period = estimate_ridge_period(finger["center"].image, finger["center"].mask)
+    for name in ("left", "right"):
+        shift = estimate_chart_shift(_unwrapped(finger["center"], period), _unwrapped(finger[name], period), period)
+        truth = rotation_angle_deg(finger[name].camera.rotation, finger["center"].camera.rotation)
+        assert shift is not None and shift.decisive
+        assert abs(abs(np.degrees(shift.turn)) - truth) < 10.0  # a first guess: the cylinder is only a circle
+    left = estimate_chart_shift(_unwrapped(finger["center"], period), _unwrapped(finger["left"], period), period)
+    right = estimate_chart_shift(_unwrapped(finger["center"], period), _unwrapped(finger["right"], period), period)
+    assert np.sign(left.turn) == -np.sign(right.turn)
+
+
+def test_different_fingers_do_not_give_a_decisive_turn(finger):
+    other = synthesize(4, SynthConfig(size=(640, 512))).capture
+    period = estimate_ridge_period(finger["center"].image, finger["center"].mask)
+    shift = estimate_chart_shift(_unwrapped(finger["center"], period), _unwrapped(other["left"], period), period)
+    assert shift is None or not shift.decisive

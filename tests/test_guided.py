@@ -1,0 +1,65 @@
+"""Guided matching recovers known warps; its information matrices say across which direction it is sure."""
+import cv2
+import numpy as np
+import pytest
+
+from fingersplat3d.align.guided import match_guided, predict_with_jacobian, structure_information
+from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+
+LINEAR = np.array([[0.9, 0.15], [-0.1, 0.8]])
+OFFSET = np.array([20.0, 30.0])
+
+
+@pytest.fixture(scope="module")
+def textures(uwa640):
+    view = uwa640["center"]
+    period = estimate_ridge_period(view.image, view.mask)
+    texture = ridge_texture(view.image, view.mask, period)
+    warp = np.concatenate([LINEAR, OFFSET[:, None]], axis=1)
+    size = texture.shape[::-1]
+    warped = cv2.warpAffine(texture, warp, size, flags=cv2.INTER_LINEAR)
+    warped_mask = cv2.warpAffine(view.mask.astype(np.uint8), warp, size, flags=cv2.INTER_NEAREST) > 0
+    return texture, view.mask, warped, warped_mask, period
+
+
+def affine(offset=(0.0, 0.0)):
+    return lambda uv: (uv @ LINEAR.T + OFFSET + np.asarray(offset), np.ones(len(uv), bool))
+
+
+def test_jacobian_of_an_affine_predictor_is_its_linear_part():
+    uv = np.array([[10.0, 20.0], [300.0, 100.0]])
+    predicted, jacobian, seen = predict_with_jacobian(affine(), uv)
+    np.testing.assert_allclose(jacobian, np.broadcast_to(LINEAR, (2, 2, 2)), atol=1e-9)
+    np.testing.assert_allclose(predicted, uv @ LINEAR.T + OFFSET)
+    assert seen.all()
+
+
+@pytest.mark.parametrize("offset, tolerance", [((0.0, 0.0), 0.05), ((3.0, -4.0), 0.5)])
+def test_known_warp_is_recovered(textures, offset, tolerance):
+    texture, mask, warped, warped_mask, period = textures
+    matches = match_guided(texture, mask, warped, warped_mask, affine(offset), period, search=0.7 * period)
+    assert len(matches) > 100
+    truth = matches.uv_a @ LINEAR.T + OFFSET
+    assert np.median(np.linalg.norm(matches.uv_b - truth, axis=1)) < tolerance
+
+
+def test_information_is_normalised_across_the_ridges_and_mapped_into_b(textures):
+    texture, mask, warped, warped_mask, period = textures
+    matches = match_guided(texture, mask, warped, warped_mask, affine(), period, search=0.7 * period)
+    eigen = np.linalg.eigvalsh(matches.information_a)
+    assert np.allclose(eigen[:, 1], 1.0 + 1e-3, atol=1e-6) and np.all(eigen[:, 0] > 0)
+    inverse = np.linalg.inv(LINEAR)
+    np.testing.assert_allclose(matches.information_b, inverse.T @ matches.information_a @ inverse, rtol=1e-9, atol=1e-12)
+
+
+def test_a_one_dimensional_texture_is_informative_across_its_stripes_only():
+    stripes = np.sin(2 * np.pi * np.arange(64)[:, None] / 8.0) * np.ones((1, 64))  # stripes along u: varies in v
+    information = structure_information(stripes.astype(np.float32), np.array([[32.0, 32.0]]), half=10)[0]
+    values, vectors = np.linalg.eigh(information)
+    assert values[0] < 0.01 and abs(vectors[1, 1]) > 0.99  # sure in v (across), not in u (along)
+
+
+def test_nothing_visible_gives_no_matches(textures):
+    texture, mask, warped, warped_mask, period = textures
+    hidden = lambda uv: (uv @ LINEAR.T + OFFSET, np.zeros(len(uv), bool))  # noqa: E731
+    assert len(match_guided(texture, mask, warped, warped_mask, hidden, period, search=period)) == 0
