@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import __version__
 from .align.global_opt import GlobalAlignConfig
+from .atomic import check_free
 from .align.register import MATCHERS, RegistrationConfig
 from .errors import EXIT_INPUT, EXIT_NOT_REGISTERED, FS3DError, InputError
 from .splat.config import DEFAULT_PRESET, PRESETS, preset
@@ -188,10 +189,8 @@ def _run_synth(args: argparse.Namespace) -> int:
                          pattern=args.pattern, appearance=appearance, gray=args.gray)
     seeds = range(args.seed, args.seed + args.count)
     targets = [args.output] if args.count == 1 else [args.output / f"{args.rig}_{seed:05d}" for seed in seeds]
-    if not args.overwrite:
-        for target in targets:
-            if target.exists() and (not target.is_dir() or any(target.iterdir())):
-                raise InputError(f"{target}: already exists and is not empty (use --overwrite to replace it)")
+    for target in targets:
+        check_free(target, args.overwrite)
     progress = tqdm(list(zip(seeds, targets)), desc="fs3d synth", unit="finger", disable=None if args.count == 1 else False)  # one finger: only on a terminal
     for seed, target in progress:
         start = time.perf_counter()
@@ -212,8 +211,7 @@ def _run_fuse(args: argparse.Namespace) -> int:
     from .io.datasets import load_any
     from .pipeline import FuseConfig, fuse, write_reconstruction
 
-    if args.output.exists() and not args.overwrite and (not args.output.is_dir() or any(args.output.iterdir())):
-        raise InputError(f"{args.output}: already exists and is not empty (use --overwrite to replace it)")
+    check_free(args.output, args.overwrite)
     if args.backend == "dust3r" and args.checkpoint is None:
         raise InputError("--backend dust3r needs --checkpoint PATH (a DUSt3R .pth file; nothing is downloaded)")
     if args.backend != "dust3r" and args.checkpoint is not None:
@@ -328,8 +326,7 @@ def _run_render(args: argparse.Namespace) -> int:
             hint = " (fuse it without --no-splat)" if needed == "gaussians.ply" else ""
             raise InputError(f"{folder / needed}: missing; 'fs3d render' needs a reconstruction folder from 'fs3d fuse'{hint}")
     output = args.output or folder / "renders"
-    if output.exists() and not args.overwrite and (not output.is_dir() or any(output.iterdir())):
-        raise InputError(f"{output}: already exists and is not empty (use --overwrite to replace it)")
+    check_free(output, args.overwrite)
     cameras = read_cameras(folder / "cameras.json")
     gaussians = read_gaussians_ply(folder / "gaussians.ply").to(default_device())
     inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .io.atomic import atomic_path
+from .atomic import atomic_path
 
 if TYPE_CHECKING:  # pragma: no cover
     import open3d as o3d

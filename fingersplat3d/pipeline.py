@@ -24,7 +24,7 @@ from .align.register import RegistrationConfig, register_views
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
-from .segment.voting import CleanConfig
+from .splat.voting import CleanConfig
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
@@ -362,7 +362,7 @@ def _scaled_camera(camera: Camera, scale: float) -> Camera:
 
 def write_reconstruction(result: Reconstruction, folder: str | Path, overwrite: bool = False) -> Path:
     """Write the reconstruction folder: fused.ply, cameras.json, depth/, mesh.ply, report.json."""
-    from .io.atomic import atomic_dir
+    from .atomic import atomic_dir
     from .io.cameras import write_cameras
     from .io.reconstruction import write_fused_cloud, write_report, write_view_depth
 

@@ -1,4 +1,4 @@
-"""Reconstruction-folder writers: fused.ply, depth/<view>.*, report.json (DESIGN.md file contracts)."""
+"""Reconstruction-folder writers: fused.ply, depth/<view>.*, report.json (docs/conventions.md file contracts)."""
 import json
 from dataclasses import dataclass
 from pathlib import Path

@@ -10,7 +10,7 @@ import torch
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval.image import fraction_alpha_outside
 from fingersplat3d.scene import Camera, look_at
-from fingersplat3d.segment.voting import (
+from fingersplat3d.splat.voting import (
     CleanConfig,
     clean_with_masks,
     split_gaussians,

@@ -10,9 +10,10 @@ offsets of the patches that correlate vote in a 2D histogram (a Hough transform)
 shift; its support (votes near the peak) and its ratio to the next-best peak say how sure it is.
 
 Measured on the nine real UWA captures (front-side pairs, 45 degrees apart): every pair's peak
-lies at 46-60 degrees, with 23-97 supporting patches out of ~300, where the global correlation
-put two of the eighteen pairs at wrong angles. Pairs 90 degrees apart share too little texture
-for a vote and are left to the guided matching, which predicts them through the 3D model.
+lies at 43-60 degrees, with 19-165 supporting patches out of ~500-700, where one global
+correlation of the whole unwrapped images put two of the eighteen pairs at wrong angles. Pairs
+90 degrees apart share too little texture for a decisive vote (one of nine) and are left to the
+guided matching, which predicts them through the 3D model.
 
 :class:`ChartPredictor` turns a shift into the pixel-to-pixel prediction the guided matcher
 (:mod:`fingersplat3d.align.guided`) starts from. Pure numpy/OpenCV.
@@ -30,10 +31,14 @@ __all__ = ["ChartShift", "estimate_chart_shift", "ChartPredictor"]
 
 MIN_PATCH_NCC = 0.3
 """A patch votes only when its best correlation reaches this."""
-MIN_SUPPORT = 20
-"""Votes near the peak a shift needs to be taken (real front-side pairs: 26-146; different fingers: 5-14)."""
+MIN_SUPPORT = 18
+"""Votes near the peak a shift needs to be taken (the nine real captures' front-side pairs: 19-165;
+views of different synthetic fingers: 8-15)."""
 MIN_RATIO = 1.3
-"""How far the peak must stand above the next one (real front-side pairs: 1.4-11; different fingers: 1.0-1.24)."""
+"""How far the peak must stand above its best rival (real front-side pairs: 1.39-11.7; different fingers
+with more than 12 votes: 1.04-1.8)."""
+RIVAL_TURN_DEG = 20.0
+"""A rival shift must differ from the peak by this much turn (or by 3 bins of d_sigma)."""
 _PATCH_PERIODS = 2.0  # patch half-size in ridge periods (patches are placed every half-size)
 _BIN_PERIODS = 0.45  # histogram bin in ridge periods
 _MAX_SIGMA_SHIFT = 0.27  # search band of d_sigma, as a fraction of the chart radius
@@ -52,7 +57,8 @@ class ChartShift:
     patches: int
     """Patches that voted (correlation >= ``MIN_PATCH_NCC``)."""
     ratio: float
-    """Smoothed histogram peak over the next-best peak outside its neighbourhood (>= 1)."""
+    """Smoothed histogram peak over the best rival: a peak at least ``RIVAL_TURN_DEG`` of turn or 3 bins of
+    ``d_sigma`` away (>= 1)."""
 
     @property
     def decisive(self) -> bool:
@@ -98,8 +104,11 @@ def estimate_chart_shift(a: Unwrapped, b: Unwrapped, period: float) -> ChartShif
     np.add.at(histogram, (((d_row - low_row) / bin_size).astype(int), ((d_col - low_col) / bin_size).astype(int)), weight)
     histogram = cv2.GaussianBlur(histogram, (0, 0), 1.0)
     peak = np.unravel_index(int(np.argmax(histogram)), shape)
+    # The runner-up is looked for beyond RIVAL_TURN of the peak: the chart's errors smear one true
+    # shift along the turn over several bins (measured on real captures: sub-peaks 7-18 degrees away).
+    reach = max(3, int(np.ceil(np.radians(RIVAL_TURN_DEG) * b.radius / b.step / bin_size)))
     others = histogram.copy()
-    others[max(0, peak[0] - 3):peak[0] + 4, max(0, peak[1] - 3):peak[1] + 4] = 0.0
+    others[max(0, peak[0] - reach):peak[0] + reach + 1, max(0, peak[1] - 3):peak[1] + 4] = 0.0
     centre_row = low_row + (peak[0] + 0.5) * bin_size
     centre_col = low_col + (peak[1] + 0.5) * bin_size
     near = (np.abs(d_row - centre_row) < 2 * bin_size) & (np.abs(d_col - centre_col) < 2 * bin_size)

@@ -1,5 +1,5 @@
 """Reading and writing: images, cameras.json, depth maps, capture folders, dataset layouts."""
-from .atomic import atomic_dir, atomic_path
+from ..atomic import atomic_dir, atomic_path
 from .cameras import CameraSet, read_cameras, write_cameras
 from .capture import CaptureFiles, capture_files, is_capture_folder, read_capture, write_capture
 from .datasets import UWAGroup, find_uwa_groups, load_any, load_cfpose, load_image_folder, load_uwa

@@ -1,6 +1,6 @@
 """``cameras.json``: the cameras of a capture or a reconstruction.
 
-Schema (DESIGN.md)::
+Schema (docs/conventions.md)::
 
     {"units": "mm" | "arbitrary", "scale_mm_per_unit": null | float,
      "views": [{"name": "v0", "image": "images/v0.png", "width": W, "height": H,
@@ -26,7 +26,7 @@ import numpy as np
 from .jsonio import read_json
 from ..errors import input_error
 from ..scene import Camera
-from .atomic import atomic_path
+from ..atomic import atomic_path
 
 __all__ = ["UNITS", "CameraSet", "read_cameras", "write_cameras"]
 

@@ -1,6 +1,6 @@
 """Capture folders: a :class:`~fingersplat3d.scene.Capture` on disk, and back.
 
-Layout (DESIGN.md)::
+Layout (docs/conventions.md)::
 
     images/<view>.png    8- or 16-bit, grayscale or RGB, as the view holds it
     masks/<view>.png     optional; 0 outside, 255 inside; never empty
@@ -38,7 +38,7 @@ from ..errors import InputError, input_error
 from ..scene import Capture, View
 from .jsonio import read_json
 from .ply import write_mesh_ply
-from .atomic import atomic_dir
+from ..atomic import atomic_dir
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
 from .images import IMAGE_SUFFIXES, read_image, read_mask, write_image, write_mask

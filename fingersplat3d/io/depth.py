@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from ..errors import input_error
-from .atomic import atomic_path
+from ..atomic import atomic_path
 
 __all__ = ["read_depth", "write_depth", "write_depth_preview", "depth_colormap"]
 

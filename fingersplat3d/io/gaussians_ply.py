@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import input_error
-from .atomic import atomic_path
+from ..atomic import atomic_path
 
 if TYPE_CHECKING:  # torch is imported on use, so ``import fingersplat3d.io`` stays light
     from ..splat.gaussians import Gaussians

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from ..errors import input_error
-from .atomic import atomic_path
+from ..atomic import atomic_path
 
 __all__ = ["IMAGE_SUFFIXES", "read_image", "write_image", "read_mask", "write_mask", "image_bit_depth"]
 

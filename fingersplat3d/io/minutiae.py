@@ -24,7 +24,7 @@ import numpy as np
 
 from .jsonio import read_json
 from ..errors import input_error
-from .atomic import atomic_path
+from ..atomic import atomic_path
 
 __all__ = ["MINUTIA_KINDS", "read_minutiae", "write_minutiae", "validate_minutiae"]
 

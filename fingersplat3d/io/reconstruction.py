@@ -1,4 +1,4 @@
-"""Writers for the files of a reconstruction folder (DESIGN.md, "File contracts").
+"""Writers for the files of a reconstruction folder (docs/conventions.md, "A reconstruction folder").
 
 ``fused.ply`` (:func:`write_fused_cloud`), ``depth/<view>.npy`` with its pictures
 (:func:`write_view_depth`) and ``report.json`` (:func:`write_report`). ``cameras.json`` is
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import cv2
 import numpy as np
 
-from .atomic import atomic_path
+from ..atomic import atomic_path
 from .cameras import UNITS
 from .depth import depth_colormap, write_depth, write_depth_preview
 from .images import write_image

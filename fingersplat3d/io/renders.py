@@ -16,7 +16,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .atomic import atomic_dir
+from ..atomic import atomic_dir
 from .cameras import write_cameras
 from .depth import depth_colormap
 from .images import write_image

@@ -1,6 +1,5 @@
-"""Finger segmentation (classical, for dark backgrounds) and multi-view mask voting of Gaussians."""
+"""Finger segmentation (classical, for dark backgrounds) and the silhouette's swept-section description."""
 from .masks import finger_mask, mask_iou
-from .voting import CleanConfig, CleanStats, Votes, clean_with_masks, split_gaussians, straddle_axes, vote_labels
+from .silhouette import Sections, SilhouetteFrame, chord_sections, principal_axis, silhouette_frame
 
-__all__ = ["finger_mask", "mask_iou",
-           "CleanConfig", "CleanStats", "Votes", "clean_with_masks", "split_gaussians", "straddle_axes", "vote_labels"]
+__all__ = ["finger_mask", "mask_iou", "Sections", "SilhouetteFrame", "chord_sections", "principal_axis", "silhouette_frame"]

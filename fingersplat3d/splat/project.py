@@ -1,6 +1,6 @@
 """EWA projection of 3D Gaussians into a pinhole camera (Zwicker et al. 2002, as in 3DGS).
 
-Camera convention (DESIGN.md): OpenCV pinhole, x right, y down, z forward, pixel centres at
+Camera convention (docs/conventions.md): OpenCV pinhole, x right, y down, z forward, pixel centres at
 integer coordinates, ``world_to_cam`` 4x4; depth is camera z. ``K``'s skew is ignored.
 
 The projection runs in float64 whatever the input dtype: it is O(N), and float32 overflows on the

@@ -1,7 +1,7 @@
 """The splatting stage of ``fs3d fuse``: fused cloud -> initial Gaussians -> fit -> mask cleaning.
 
 Glue between the Open3D cloud, the torch fit (:mod:`.fit`) and the multi-view segmentation
-post-processing (:mod:`fingersplat3d.segment.voting`); returns a typed result with what the
+post-processing (:mod:`fingersplat3d.splat.voting`); returns a typed result with what the
 report needs. Imports Open3D (through :mod:`.init`).
 """
 from __future__ import annotations
@@ -46,7 +46,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
                     device: torch.device | None = None, progress: bool = False) -> SplatStage:
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
-    from ..segment.voting import CleanConfig, clean_with_masks
+    from .voting import CleanConfig, clean_with_masks
 
     device = default_device() if device is None else torch.device(device)
     clean_config = CleanConfig() if clean_config is None else clean_config

@@ -110,7 +110,7 @@ def load_model(path: str | Path, device: torch.device | str = "cpu") -> Dust3rNe
 
 def save_checkpoint(model: Dust3rNet, path: str | Path) -> Path:
     """Write ``model`` in the official layout (``{"model": state_dict, "args": Namespace(model=...)}``)."""
-    from ...io.atomic import atomic_path
+    from ...atomic import atomic_path
 
     path = Path(path)
     args = argparse.Namespace(model=model.architecture.describe())

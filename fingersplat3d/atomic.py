@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_dir"]
+__all__ = ["atomic_path", "atomic_dir", "check_free"]
 
 
 def _umask() -> int:
@@ -38,6 +38,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         temporary.unlink(missing_ok=True)
 
 
+def check_free(path: str | Path, overwrite: bool = False) -> None:
+    """Refuse (``FileExistsError``, one sentence) an existing, non-empty ``path`` unless ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
+        raise FileExistsError(f"{path}: already exists and is not empty (use --overwrite to replace it)")
+
+
 @contextlib.contextmanager
 def atomic_dir(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary folder next to ``path``; rename it to ``path`` when the block succeeds.
@@ -46,8 +53,7 @@ def atomic_dir(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
     without it an existing, non-empty ``path`` is an error raised before anything is written.
     """
     path = Path(path)
-    if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
-        raise FileExistsError(f"{path}: already exists and is not empty (use --overwrite to replace it)")
+    check_free(path, overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-", dir=path.parent))
     os.chmod(temporary, 0o777 & ~_umask())  # mkdtemp makes 0700

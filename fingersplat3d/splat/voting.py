@@ -34,7 +34,7 @@ import torch
 
 from ..errors import InputError
 from ..scene import Camera
-from ..splat.gaussians import Gaussians
+from .gaussians import Gaussians
 from ..rotations import quaternion_to_matrix
 
 __all__ = ["Votes", "CleanConfig", "CleanStats", "vote_labels", "straddle_axes", "split_gaussians",
