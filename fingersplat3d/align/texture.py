@@ -155,6 +155,7 @@ def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor:
 
 def ridge_texture(gray: np.ndarray, mask: np.ndarray, period: float) -> np.ndarray:
     """Band-passed ridge texture ``[H, W]`` float32 with unit local RMS inside ``mask``, 0 outside."""
+    gray = as_gray(gray)
     weight = np.asarray(mask, np.float32)
     clean = suppress_glints(gray, np.asarray(mask, bool), radius=max(1, int(round(period / 12)))) * weight
 

@@ -108,7 +108,9 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     else:
         rig = cfpose_rig(params, np.random.default_rng(rng.integers(2**63)), size, config.focal, config.poses)
     gray = config.gray if config.gray is not None else config.rig != "cfpose"
-    appearance = replace(config.appearance, rgb=not gray)
+    # Optics and glints are set for the rig's default image size: a smaller image is blurred less (in pixels).
+    zoom = size[0] / DEFAULT_SIZES[config.rig][0]
+    appearance = replace(config.appearance, rgb=not gray, blur_px=config.appearance.blur_px * zoom)
     scene = FingerScene(surface, pattern, seed=int(rng.integers(2**31)))
     noise_rng = np.random.default_rng(rng.integers(2**63))
     renderings = {view.name: scene.render(view.camera, view.light_world, appearance, noise_rng) for view in rig}

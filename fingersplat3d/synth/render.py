@@ -69,7 +69,7 @@ class Appearance:
     background: float = 0.02
     """Background intensity (dark by default)."""
     blur_px: float = 2.0
-    """Gaussian blur sigma in pixels (optics); 0 for none."""
+    """Gaussian blur sigma in pixels (optics) at the rig's default image size (scaled with the image); 0 for none."""
     noise: float = 0.006
     """Gaussian sensor noise sigma; 0 for none."""
 
