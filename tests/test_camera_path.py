@@ -135,3 +135,14 @@ def test_degenerate_rigs_raise():
         cameras_at_angles([cameras[1], cameras[1]], [10.0])
     with pytest.raises(ValueError):
         arc_cameras(cameras, count=1)
+
+
+def test_a_camera_stored_portrait_is_turned_back_before_the_arc():
+    cameras = [view.camera for view in ring_rig(PARAMS, (-45.0, 0.0, 45.0), SIZE)]
+    from fingersplat3d.splat.camera_path import _quarter_turn
+
+    portrait = list(cameras)
+    portrait[1] = _quarter_turn(cameras[1], 1)  # the middle image stored turned by 90 degrees
+    assert portrait[1].size == cameras[1].size[::-1]
+    for a, b in zip(arc_cameras(portrait, 7), arc_cameras(cameras, 7)):
+        assert_same_camera(a, b, 1e-6)

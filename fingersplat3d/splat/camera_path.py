@@ -18,7 +18,10 @@ the finger that rolls, which is the same relative geometry), so the path is defi
 Arc camera ``k`` sits at angle ``lo + k (hi - lo) / (count - 1)``. Between the two input cameras
 that bracket it, its orientation is their slerp and its centre the blend of their centres rotated
 about the axis (through the pivot) to that angle; the ends are the input end cameras exactly.
-All inputs must share the image size; ``K`` is interpolated the same way (all equal in practice).
+All inputs share the image size, except that a camera stored portrait among landscape ones (or
+the other way round: the same camera, its image turned by 90 degrees, as UWA stores one now and
+then) is first turned back about its optical axis, by whichever quarter turn brings it closest
+to the others; ``K`` is interpolated the same way (all equal in practice).
 
 Degenerate input raises ``ValueError``: fewer than 2 cameras, cameras with the same orientation
 (no axis to turn about), or parallel optical axes (no pivot). numpy, with the quaternion conversions of
@@ -65,7 +68,7 @@ def rig_geometry(cameras: Sequence[Camera]) -> RigGeometry:
 
 def arc_cameras(cameras: Sequence[Camera], count: int = 12) -> list[Camera]:
     """``count`` cameras at equal angles from the leftmost to the rightmost input camera (inclusive)."""
-    cameras = list(cameras)
+    cameras = _upright(list(cameras))
     if count < 2:
         raise ValueError(f"an arc needs at least 2 cameras, got count={count}")
     _check_sizes(cameras)
@@ -99,7 +102,7 @@ def cameras_at_angles(cameras: Sequence[Camera], angles_deg: Sequence[float],
     ``reference``: an index into ``cameras``, a camera, or None for the middle input camera (the
     one whose angle is nearest the middle of the span; with two cameras, the leftmost).
     """
-    cameras = list(cameras)
+    cameras = _upright(list(cameras))
     rig = rig_geometry(cameras)
     if reference is None:
         middle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
@@ -116,6 +119,36 @@ def cameras_at_angles(cameras: Sequence[Camera], angles_deg: Sequence[float],
 
 
 # --- helpers -----------------------------------------------------------------------------------
+
+def _quarter_turn(camera: Camera, sign: int) -> Camera:
+    """The same camera with its image turned by a quarter turn (``sign`` +1 or -1) about the optical axis."""
+    width, height = camera.height, camera.width
+    turn = np.array([[0.0, -sign, 0.0], [sign, 0.0, 0.0], [0.0, 0.0, 1.0]])  # new camera frame from the old
+    K = np.array([[camera.K[1, 1], 0.0, (width - 1) / 2.0], [0.0, camera.K[0, 0], (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    pose = camera.world_to_cam.copy()
+    pose[:3, :3] = turn @ pose[:3, :3]
+    pose[:3, 3] = turn @ pose[:3, 3]
+    return Camera(K, pose, width, height)
+
+
+def _upright(cameras: list[Camera]) -> list[Camera]:
+    """Cameras stored with the image turned by 90 degrees against the majority, turned back."""
+    sizes = [camera.size for camera in cameras]
+    majority = max(set(sizes), key=sizes.count)
+    upright = [camera for camera in cameras if camera.size == majority]
+    result = []
+    for camera in cameras:
+        if camera.size == majority or camera.size != majority[::-1] or not upright:
+            result.append(camera)
+            continue
+        candidates = [_quarter_turn(camera, sign) for sign in (1, -1)]
+        result.append(min(candidates, key=lambda c: min(_rotation_angle(c.rotation, u.rotation) for u in upright)))
+    return result
+
+
+def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(a @ b.T) - 1.0) / 2.0, -1.0, 1.0)))
+
 
 def _check_sizes(cameras: list[Camera]) -> None:
     sizes = {camera.size for camera in cameras}
