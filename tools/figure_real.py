@@ -1,6 +1,9 @@
 """Picture of ``fs3d fuse`` on a real UWA capture (for the README): photos, recovered depth, cameras.
 
-    python3 tools/figure_real.py ../shared/data/uwa-real-dev 2_2_8_1 docs/images/real_2_2_8_1.png
+    python3 tools/figure_real.py ../shared/data/uwa-real-dev 2_2_8_1 out/real_2_2_8_1.png
+
+The picture shows real fingerprints: write it outside the repository (the captures are read at
+run time only, never kept in it).
 
 Top row: the three photos with their finger outline; bottom row: each view's recovered depth
 (colour-mapped, as the depth previews of a reconstruction folder) and the relative angles the
