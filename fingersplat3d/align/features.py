@@ -8,7 +8,12 @@ No camera parameters are needed.
 
 Methods (measured against synthetic ground truth by ``tools/bench_matching.py``):
 
-* ``minutiae`` (default): keypoints are ridge endings and bifurcations (band-pass at the measured
+These are the classic matchers, kept as ``--matcher`` options; the default first guess of
+``fs3d fuse`` is the ``surface`` registration of :mod:`fingersplat3d.align.register`, since on
+real photos (faint ridges, 45 degrees apart) ``minutiae`` finds no match and SIFT verifies at
+chance level. Their figures below are from the generator's earlier, crisp-ridged images.
+
+* ``minutiae``: keypoints are ridge endings and bifurcations (band-pass at the measured
   ridge period, binarise, thin, crossing number), described by RootSIFT over ~3 ridge periods,
   matched (ratio 0.95 + mutual), verified (MAGSAC fundamental matrix), then every match is refined
   to sub-pixel by aligning a 4-period patch of the band-passed texture with an affine ECC warp and
@@ -20,7 +25,7 @@ Methods (measured against synthetic ground truth by ``tools/bench_matching.py``)
   match ``score``. ``densify=True`` adds grid points grown the same way (3-4x the matches, median
   error 0.9-1.4 px instead of 0.7: plain texture is ambiguous along the ridges).
 
-  Why the default (numbers from the bench, uwa 640x512, seeds 0-2): the ridge texture is
+  Why it was the default before (numbers from the bench, uwa 640x512, seeds 0-2): the ridge texture is
   periodic, so generic detectors are not repeatable across 45 degrees of foreshortening (SIFT
   keypoints coincide within 2 px about as often as random points would) and their verified
   matches are mostly wrong along the epipolar lines: sift 25-48 % within 2 px, median 2.1 px
