@@ -142,8 +142,8 @@ def _distinct_pairs(capture: Capture) -> list[tuple[int, int]]:
             if not (views[a].image.shape == views[b].image.shape and np.array_equal(views[a].image, views[b].image))]
 
 
-def _pointmaps(capture: Capture, config: FuseConfig, report: dict):
-    """Own-frame pointmaps of every view and, from a pairwise backend, the pairs' pointmaps (else None)."""
+def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfig, report: dict):
+    """Own-frame pointmaps of every view and, from a pairwise backend, the ``pairs``' pointmaps (else None)."""
     backend = _backend(config)
     pointmaps = backend.predict_views(capture.views)
     for pointmap, view in zip(pointmaps, capture.views):
@@ -151,16 +151,16 @@ def _pointmaps(capture: Capture, config: FuseConfig, report: dict):
             raise InputError(f"view {view.name!r}: the {config.backend} backend gave no finite 3D point on the finger")
     pair_pointmaps = None
     if hasattr(backend, "predict_pairs"):  # learned pairwise pointmaps replace image matching
-        pairs = _distinct_pairs(capture)
         pair_pointmaps = {(p.i, p.j): p for p in backend.predict_pairs(capture.views, pairs)} if pairs else {}
     if getattr(backend, "stats", None):
         report["pointmap_inference"] = [asdict(record) for record in backend.stats]
     return pointmaps, pair_pointmaps
 
 
-def _register(capture: Capture, pointmaps, pair_pointmaps, config: FuseConfig, report: dict, say) -> GlobalAlignment:
-    """Pair relations and the global alignment: image correspondences, or the backend's pairwise pointmaps."""
-    pairs = _distinct_pairs(capture)
+def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_pointmaps, config: FuseConfig,
+              report: dict, say) -> GlobalAlignment:
+    """Pair relations of the distinct ``pairs`` and the global alignment: image correspondences, or the
+    backend's pairwise pointmaps."""
     identical = [{"a": capture.views[a].name, "b": capture.views[b].name, "ok": False,
                   "reason": "identical images: no parallax (monocular mode)"}
                  for a in range(len(capture)) for b in range(a + 1, len(capture)) if (a, b) not in pairs]
@@ -187,11 +187,11 @@ def _register(capture: Capture, pointmaps, pair_pointmaps, config: FuseConfig, r
                         config.registration.global_align)
 
 
-def _alignment_status(capture: Capture, alignment: GlobalAlignment, report: dict) -> dict:
+def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: GlobalAlignment, report: dict) -> dict:
     """Whether the views were registered; said on stderr and in the report when they were not."""
     names = capture.names
     missing = [names[v] for v in range(len(capture)) if not alignment.aligned[v]]
-    monocular = len(capture) == 1 or not _distinct_pairs(capture)
+    monocular = len(capture) == 1 or not pairs
     status = {"ok": True, "mode": "monocular" if monocular else "multi-view"}
     if monocular:
         return status
@@ -288,14 +288,15 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         with step("masks"):
             capture = _with_masks(capture)
         bar.update()
+        pairs = _distinct_pairs(capture)
         with step("pointmaps"):
-            pointmaps, pair_pointmaps = _pointmaps(capture, config, report)
+            pointmaps, pair_pointmaps = _pointmaps(capture, pairs, config, report)
         bar.update()
         with step("registration"):
-            alignment = _register(capture, pointmaps, pair_pointmaps, config, report,
+            alignment = _register(capture, pairs, pointmaps, pair_pointmaps, config, report,
                                   lambda text: bar.set_postfix_str(f"registration: {text}"))
         bar.update()
-        report["alignment"] = _alignment_status(capture, alignment, report)
+        report["alignment"] = _alignment_status(capture, pairs, alignment, report)
         cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])
                    for v, view in enumerate(capture.views)]
         depths = [np.where(view.mask, alignment.depths[v], np.nan).astype(np.float32) for v, view in enumerate(capture.views)]

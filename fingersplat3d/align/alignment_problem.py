@@ -136,30 +136,36 @@ class AlignmentProblem(torch.nn.Module):
         count = self.medians.shape[0]
         return torch.exp(self.log_focal.expand(count) if self.shared_focal else self.log_focal)
 
-    def depth(self, view: torch.Tensor, z: torch.Tensor, index: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    def depth(self, view: torch.Tensor, z: torch.Tensor, index: torch.Tensor, weight: torch.Tensor,
+              scales: torch.Tensor | None = None) -> torch.Tensor:
+        """Depth of view ``view``'s surface at pointmap depth ``z`` with field basis ``(index, weight)``."""
+        scales = self.scales() if scales is None else scales
         field = (self.field[index] * weight).sum(-1) if self.field.numel() else torch.zeros_like(z)
         median = self.medians[view]
-        return self.scales()[view] * (median + torch.exp(self.log_alpha[view]) * (z - median) + self.reliefs[view] * field)
+        return scales[view] * (median + torch.exp(self.log_alpha[view]) * (z - median) + self.reliefs[view] * field)
 
-    def world_points(self, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-        focal = self.focals()[view]
-        rays = torch.cat([(uv - self.centres[view]) / focal[:, None], torch.ones_like(uv[:, :1])], dim=1)
-        return torch.einsum("nij,nj->ni", self.rotations()[view], depth[:, None] * rays) + self.translations()[view]
+    def _world_points(self, cameras: tuple, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        rotations, translations, focals = cameras
+        rays = torch.cat([(uv - self.centres[view]) / focals[view][:, None], torch.ones_like(uv[:, :1])], dim=1)
+        return torch.einsum("nij,nj->ni", rotations[view], depth[:, None] * rays) + translations[view]
 
-    def project(self, view: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
-        camera = torch.einsum("nji,nj->ni", self.rotations()[view], points - self.translations()[view])
+    def _project(self, cameras: tuple, view: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        rotations, translations, focals = cameras
+        camera = torch.einsum("nji,nj->ni", rotations[view], points - translations[view])
         z = camera[:, 2].clamp_min(1e-9)
-        return camera[:, :2] / z[:, None] * self.focals()[view][:, None] + self.centres[view]
+        return camera[:, :2] / z[:, None] * focals[view][:, None] + self.centres[view]
 
     # -- the loss -------------------------------------------------------------------------------
     def correspondence_terms(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """World points of both ends ``[M, 3]`` and the information-weighted squared errors ``[M]`` a->b and b->a."""
-        depth_a = self.depth(self.view_a, self.z_a, self.basis_index_a, self.basis_weight_a)
-        depth_b = self.depth(self.view_b, self.z_b, self.basis_index_b, self.basis_weight_b)
-        x_a = self.world_points(self.view_a, self.uv_a, depth_a)
-        x_b = self.world_points(self.view_b, self.uv_b, depth_b)
-        r_ab = self.project(self.view_b, x_a) - self.uv_b
-        r_ba = self.project(self.view_a, x_b) - self.uv_a
+        cameras = (self.rotations(), self.translations(), self.focals())  # once per evaluation
+        scales = self.scales()
+        depth_a = self.depth(self.view_a, self.z_a, self.basis_index_a, self.basis_weight_a, scales)
+        depth_b = self.depth(self.view_b, self.z_b, self.basis_index_b, self.basis_weight_b, scales)
+        x_a = self._world_points(cameras, self.view_a, self.uv_a, depth_a)
+        x_b = self._world_points(cameras, self.view_b, self.uv_b, depth_b)
+        r_ab = self._project(cameras, self.view_b, x_a) - self.uv_b
+        r_ba = self._project(cameras, self.view_a, x_b) - self.uv_a
         e_ab = torch.einsum("ni,nij,nj->n", r_ab, self.info_b, r_ab)
         e_ba = torch.einsum("ni,nij,nj->n", r_ba, self.info_a, r_ba)
         return x_a, x_b, e_ab, e_ba

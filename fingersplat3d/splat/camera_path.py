@@ -34,6 +34,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 import torch
 
+from ..eval.poses import rotation_angle_deg
 from ..scene import Camera
 from ..rotations import matrix_to_quaternion, quaternion_to_matrix
 
@@ -142,12 +143,8 @@ def _upright(cameras: list[Camera]) -> list[Camera]:
             result.append(camera)
             continue
         candidates = [_quarter_turn(camera, sign) for sign in (1, -1)]
-        result.append(min(candidates, key=lambda c: min(_rotation_angle(c.rotation, u.rotation) for u in upright)))
+        result.append(min(candidates, key=lambda c: min(rotation_angle_deg(c.rotation, u.rotation) for u in upright)))
     return result
-
-
-def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(a @ b.T) - 1.0) / 2.0, -1.0, 1.0)))
 
 
 def _check_sizes(cameras: list[Camera]) -> None:
