@@ -67,7 +67,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"fingersplat3d {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_synth(commands)
+    _add_fuse(commands)
+    _add_info(commands)
+    _add_preview(commands)
+    _add_render(commands)
+    return parser
 
+
+def _add_synth(commands) -> None:
+    """``fs3d synth``: its arguments."""
     synth = commands.add_parser(
         "synth", help="generate synthetic 3D fingers photographed by a rig, with exact ground truth",
         description="Generate procedural 3D fingertips with fingerprint ridges and photograph them with a "
@@ -95,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--overwrite", action="store_true", help="replace existing output folders")
     synth.set_defaults(run=_run_synth)
 
+
+def _add_fuse(commands) -> None:
+    """``fs3d fuse``: its arguments."""
     fuse = commands.add_parser(
         "fuse", help="3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaussians, depth maps, mesh",
         description="Recover the cameras and one fused 3D finger surface from photos with no camera "
@@ -129,24 +141,33 @@ def build_parser() -> argparse.ArgumentParser:
     splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
                        help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
     splat.add_argument("--splat-iterations", type=_STEPS, help="override the preset's optimisation steps")
-    splat.add_argument("--splat-budget-density", type=_POSITIVE,
-                       help="override the Gaussians per (ridge period/4)^2 of finger area")
+    splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=_POSITIVE, dest="splat_gaussians_per_cell",
+                       help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
+                            "(--splat-budget-density: its former name)")
     splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
     fuse.add_argument("--icp", action="store_true",
                       help="refine poses with Open3D ICP (guarded; off by default: on near-cylindrical fingers "
                            "it slides about the axis, see the README)")
-    fuse.add_argument("--alignment-iterations", type=_STEPS, default=GlobalAlignConfig.polish_iterations,
-                      help=f"L-BFGS iterations of each global alignment round (default {GlobalAlignConfig.polish_iterations})")
+    fuse.add_argument("--polish-iterations", "--alignment-iterations", type=_STEPS, dest="polish_iterations",
+                      default=GlobalAlignConfig.polish_iterations,
+                      help=f"L-BFGS iterations of each global alignment round (default {GlobalAlignConfig.polish_iterations}; "
+                           "--alignment-iterations: its former name)")
     fuse.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     fuse.set_defaults(run=_run_fuse)
 
+
+def _add_info(commands) -> None:
+    """``fs3d info``: its arguments."""
     info = commands.add_parser("info", help="describe a capture folder or a dataset folder",
                                description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds.")
     info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder or image files")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(run=_run_info)
 
+
+def _add_preview(commands) -> None:
+    """``fs3d preview``: its arguments."""
     preview = commands.add_parser("preview", help="save a contact-sheet picture of a capture",
                                   description="Save a PNG with, for each view, the photo (ground-truth minutiae drawn: "
                                               "endings red, bifurcations blue), the mask and the depth map.")
@@ -155,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
     preview.add_argument("--tile-width", type=_number(int, 16, 8192), default=480, help="width of each tile in pixels")
     preview.set_defaults(run=_run_preview)
 
+
+def _add_render(commands) -> None:
+    """``fs3d render``: its arguments."""
     render = commands.add_parser(
         "render", help="render novel views of a fitted finger (gaussians.ply) at any angle",
         description="Render new views of the Gaussian-splat model of a reconstruction folder written by "
@@ -171,7 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--scale", type=_number(float, 0.01, 8.0), default=1.0, help="image size relative to the input views (default 1)")
     render.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     render.set_defaults(run=_run_render)
-    return parser
+
 
 
 def _run_synth(args: argparse.Namespace) -> int:
@@ -221,15 +245,13 @@ def _run_fuse(args: argparse.Namespace) -> int:
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
-                                      global_align=GlobalAlignConfig(polish_iterations=args.alignment_iterations))
+                                      global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
                         splat=_splat_config(args))
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True)
-    if "splat" in result.report:
-        result.report["splat"]["preset"] = args.splat_preset
     write_reconstruction(result, args.output, overwrite=args.overwrite)
     alignment = result.report["alignment"]
     residual = "one view: nothing to align" if len(result.capture) == 1 else (
@@ -253,7 +275,7 @@ def _splat_config(args: argparse.Namespace):
     """The splat settings from ``--splat-*`` (None with ``--no-splat``)."""
     if args.no_splat:
         return None
-    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_budget_density,
+    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
                   refine_poses=False if args.no_pose_refinement else None)
 
 
@@ -317,7 +339,7 @@ def _run_render(args: argparse.Namespace) -> int:
     from .io.gaussians_ply import read_gaussians_ply
     from .io.renders import write_renders
     from .splat.camera_path import arc_cameras, cameras_at_angles
-    from .splat.fit import default_device
+    from .device import resolve_device
     from .splat.novel import render_views
 
     folder = args.reconstruction
@@ -328,7 +350,7 @@ def _run_render(args: argparse.Namespace) -> int:
     output = args.output or folder / "renders"
     check_free(output, args.overwrite)
     cameras = read_cameras(folder / "cameras.json")
-    gaussians = read_gaussians_ply(folder / "gaussians.ply").to(default_device())
+    gaussians = read_gaussians_ply(folder / "gaussians.ply").to(resolve_device("auto"))
     inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]
     start = time.perf_counter()
     try:

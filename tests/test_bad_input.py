@@ -369,7 +369,7 @@ def test_one_view_says_there_is_nothing_to_align(two_fingers, tmp_path, capsys):
     assert "one view: nothing to align" in out and "nan" not in out
 
 
-@pytest.mark.parametrize("option, value", [("--alignment-iterations", "-5"), ("--guided-rounds", "1.5"),
+@pytest.mark.parametrize("option, value", [("--polish-iterations", "-5"), ("--guided-rounds", "1.5"),
                                            ("--splat-iterations", "-1"), ("--px-per-mm", "nan"),
                                            ("--finger-width-mm", "-3"), ("--pair-batch", "0")])
 def test_numeric_options_are_range_checked_in_one_sentence(two_fingers, tmp_path, capsys, option, value):

@@ -79,7 +79,7 @@ def test_batches_of_pairs_give_the_same_pointmaps(small_capture):
 def test_fs3d_fuse_with_a_checkpoint_end_to_end(checkpoint, tmp_path, capsys):
     out = tmp_path / "rec"
     code = main(["fuse", str(SAMPLE), "-o", str(out), "--backend", "dust3r", "--checkpoint", str(checkpoint),
-                 "--device", "cpu", "--pair-batch", "2", "--alignment-iterations", "20", "--no-splat"])
+                 "--device", "cpu", "--pair-batch", "2", "--polish-iterations", "20", "--no-splat"])
     # Random weights describe no rigid scene: the pairs are refused, the outputs are written and the
     # exit status says that the views were not registered.
     assert code == 3, capsys.readouterr().err

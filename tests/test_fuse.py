@@ -89,6 +89,8 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     assert meshset.current_mesh().vertex_number() == report["splat"]["gaussians"] > 1000
     assert report["stages"]["splat"]["seconds"] > 0 and len(report["splat"]["psnr_in_mask_db"]) == 3
+    # one name per setting: the flag, the config field and report.json say the same
+    assert report["splat"]["preset"] == "fast" and report["splat"]["differs_from_preset"] == {"iterations": 4}
     # Novel views on the arc from the leftmost to the rightmost camera.
     assert main(["render", str(out), "--count", "3", "--scale", "0.25"]) == 0
     renders = sorted(p.name for p in (out / "renders").glob("arc_*.png"))

@@ -18,7 +18,7 @@ def test_install_script_pins_the_cpu_torch_build():
 
 # The layers of docs/architecture.md, lowest first: a module imports only from its own layer or below.
 LAYERS = [
-    {"errors", "rotations", "sampling", "scene", "device", "atomic", "__init__"},
+    {"errors", "rotations", "sampling", "ssim", "scene", "device", "atomic", "__init__"},
     {"segment", "geometry"},
     {"pointmaps"},
     {"align"},
@@ -62,3 +62,48 @@ def test_imports_run_down_the_layers_and_make_no_circle():
             assert layer[target] <= layer[own], f"{module} imports {target} from a higher layer"
     layers_doc = (ROOT / "docs" / "architecture.md").read_text()
     assert all(f"`{name}`" in layers_doc for names in LAYERS for name in names - {"__init__"})
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """fingersplat3d module -> the fingersplat3d modules it imports (anywhere in its body, lazily too)."""
+    import ast
+
+    modules = {}
+    for path in (ROOT / "fingersplat3d").rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        is_package = parts[-1] == "__init__"
+        modules[".".join(parts[:-1] if is_package else parts)] = (path, is_package)
+    graph = {}
+    for name, (path, is_package) in modules.items():
+        base = name.split(".") if is_package else name.split(".")[:-1]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                source = ".".join(base[:len(base) - node.level + 1] + [node.module] if node.module else
+                                  base[:len(base) - node.level + 1]) if node.level else (node.module or "")
+                targets |= {f"{source}.{alias.name}" if f"{source}.{alias.name}" in modules else source for alias in node.names}
+            elif isinstance(node, ast.Import):
+                targets |= {alias.name for alias in node.names}
+        graph[name] = {target for target in targets if target in modules and target != name}
+    return graph
+
+
+def test_the_import_graph_has_no_circle():
+    graph = _module_graph()
+    assert "fingersplat3d.pointmaps.prior" in graph["fingersplat3d.pointmaps"]  # the graph sees package imports
+    state: dict[str, int] = {}
+    path: list[str] = []
+
+    def visit(module: str) -> None:
+        state[module] = 1
+        path.append(module)
+        for target in sorted(graph[module]):
+            assert state.get(target) != 1, "import circle: " + " -> ".join(path[path.index(target):] + [target])
+            if target not in state:
+                visit(target)
+        path.pop()
+        state[module] = 2
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module)

@@ -8,9 +8,9 @@ import torch
 
 from fingersplat3d.scene import Camera, View, look_at
 from fingersplat3d.splat import Gaussians, rgb_to_sh
-from fingersplat3d.splat.config import PRESETS, SplatConfig, preset
+from fingersplat3d.splat.config import PRESETS, SplatConfig, differences_from_preset, preset
 from fingersplat3d.splat.fit import fit_camera, fit_gaussians, gaussian_budget, render_camera
-from fingersplat3d.splat.strategy import GradientStats, densify_and_prune, gaussians_of
+from fingersplat3d.splat.strategy import GAUSSIAN_GROUPS, GradientStats, densify_and_prune, gaussians_of
 
 
 def test_presets_trade_time_for_detail():
@@ -20,6 +20,9 @@ def test_presets_trade_time_for_detail():
     assert preset("fast", iterations=7).iterations == 7 and preset("fast", iterations=None) == fast
     with pytest.raises(ValueError, match="unknown splat preset"):
         preset("fastest")
+    assert preset("fast").preset == "fast" and differences_from_preset(preset("fast")) == {}
+    assert differences_from_preset(preset("balanced", iterations=9, gaussians_per_cell=2.0)) == {"iterations": 9, "gaussians_per_cell": 2.0}
+    assert "iterations" in differences_from_preset(SplatConfig())  # no preset: every setting is listed
     with pytest.raises(ValueError, match="unknown splat setting"):
         preset("fast", iteration=3)
     with pytest.raises(ValueError):
@@ -94,7 +97,7 @@ def test_fit_recovers_a_known_scene_from_a_perturbed_start():
 def test_density_control_respects_budget_and_keeps_adam_state():
     model = _plane_scene(n_side=10)
     parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
-    optimizer = torch.optim.Adam([{"params": [p], "lr": 1e-3} for p in parameters])
+    optimizer = torch.optim.Adam([{"params": [p], "lr": 1e-3, "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
     sum(p.sum() for p in parameters).backward()
     optimizer.step()
     n = len(model)
@@ -118,7 +121,7 @@ def test_density_control_respects_budget_and_keeps_adam_state():
 def test_split_children_are_smaller_and_inside_the_parent():
     model = _plane_scene(n_side=4)
     parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
-    optimizer = torch.optim.Adam([{"params": [p]} for p in parameters])
+    optimizer = torch.optim.Adam([{"params": [p], "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
     stats = GradientStats.zeros(len(model), torch.device("cpu"))
     stats.add(torch.ones(len(model), 2), torch.ones(len(model), dtype=torch.int32), 64, 48)
     result = densify_and_prune(optimizer, stats, SplatConfig(percent_dense=0.0), extent=10.0, budget=100,

@@ -22,12 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
-
-from benchmachine import machine  # noqa: E402
-from fingersplat3d.pointmaps.dust3r import Dust3rBackend, Dust3rNet, parse_model_description  # noqa: E402
+from fingersplat3d.eval.machine import machine
+from fingersplat3d.pointmaps.dust3r import Dust3rBackend, Dust3rNet, parse_model_description
 from fingersplat3d.scene import View  # noqa: E402
 
 LARGE = ("enc_embed_dim=1024, enc_depth=24, enc_num_heads=16, dec_embed_dim=768, dec_depth=12, dec_num_heads=12, "

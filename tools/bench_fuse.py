@@ -46,7 +46,7 @@ import tempfile
 import time
 import traceback
 from pathlib import Path
-from benchmachine import machine  # tools/ is on sys.path when run as a script
+from fingersplat3d.eval.machine import machine
 
 # Synthetic captures: key -> (SynthConfig keyword arguments, view selection)
 SYNTH = {

@@ -18,15 +18,12 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 import time
 from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmachine import machine
-
+from fingersplat3d.eval.machine import machine
 from fingersplat3d.splat import matrix_to_quaternion, rasterize
 from fingersplat3d.splat.binning import bin_gaussians
 from fingersplat3d.splat.composite import _grid, _tile_centres, pair_alpha

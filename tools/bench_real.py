@@ -71,7 +71,7 @@ def _leave_one_out(capture, three, two) -> dict:
 
     if not (three.registered and two.registered):
         return {"outside_mask": None, "texture_ncc": None}
-    view0, view2 = three.capture.views[0], three.capture.views[2]
+    view2 = three.capture.views[2]
     rows, cols = np.nonzero(np.isfinite(three.depths[0]) & np.isfinite(two.depths[0]))
     pick = np.random.default_rng(0).choice(len(rows), min(4000, len(rows)), replace=False)
     pixels0 = np.stack([cols[pick], rows[pick]], 1).astype(np.float64)
@@ -183,7 +183,7 @@ def rig_consistency(records: list[dict]) -> dict:
 
 
 def main() -> int:
-    from benchmachine import machine  # tools/ is on sys.path when run as a script
+    from fingersplat3d.eval.machine import machine
     from fingersplat3d.eval.poses import rotation_angle_deg
     from fingersplat3d.io.datasets import find_uwa_groups
 

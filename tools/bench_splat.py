@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmachine import machine  # tools/ is on sys.path when run as a script
+from fingersplat3d.eval.machine import machine
 
 TRAIN = ("v0", "v2", "v4")
 HELD_OUT = {"v1": -22.5, "v3": 22.5}

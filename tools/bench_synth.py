@@ -30,7 +30,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from benchmachine import machine  # tools/ is on sys.path when run as a script
+from fingersplat3d.eval.machine import machine
 
 RIG_SPECS = {
     # key: (label, SynthConfig keyword arguments, image-minutiae match test?)

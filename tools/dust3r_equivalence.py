@@ -30,10 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from fingersplat3d.pointmaps.dust3r import load_model, prepare_image  # noqa: E402
+from fingersplat3d.pointmaps.dust3r import load_model, prepare_image
 
 TINY = "enc_embed_dim=64, enc_depth=3, enc_num_heads=4, dec_embed_dim=48, dec_depth=10, dec_num_heads=3"
 CASES = [

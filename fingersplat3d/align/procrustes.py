@@ -92,12 +92,6 @@ class Similarity:
         return Similarity(self.scale * other.scale, self.rotation @ other.rotation,
                           self.scale * (self.rotation @ other.translation) + self.translation)
 
-    @property
-    def rotation_degrees(self) -> float:
-        """Angle of the rotation, degrees."""
-        cosine = (np.trace(self.rotation) - 1.0) / 2.0
-        return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
-
 
 def _fit_batch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray, with_scale: bool):
     """Weighted Umeyama over a batch: ``src, dst [B, n, 3]``, ``weights [B, n]`` (each row sums > 0).

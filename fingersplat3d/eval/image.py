@@ -5,27 +5,20 @@ bool (None = the whole image). Scores are plain floats.
 
 * PSNR = ``10 log10(1 / MSE)`` with the MSE over the mask pixels and all channels
   (``inf`` for identical images).
-* SSIM (Wang et al. 2004): 11x11 Gaussian window, sigma 1.5, ``C1 = 0.01^2``, ``C2 = 0.03^2``,
-  the map computed per channel on the *full* image (reflected borders, so nothing outside the
-  image counts) and then averaged over the mask pixels and channels. Near the mask edge the
-  window also sees pixels just outside the mask, as it would for any crop of the image.
+* SSIM: :func:`fingersplat3d.ssim.ssim_map` (Wang et al. 2004, the same SSIM that trains the
+  splats), the map computed per channel on the *full* image (reflected borders, so nothing
+  outside the image counts) and then averaged over the mask pixels and channels. Near the mask
+  edge the window also sees pixels just outside the mask, as it would for any crop of the image.
 
-Pure numpy + OpenCV filtering; no torch, no Open3D, no files.
+numpy in, floats out; no Open3D, no files.
 """
 from __future__ import annotations
 
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 
 __all__ = ["ImageScores", "image_scores", "masked_psnr", "masked_ssim", "ssim_map", "fraction_alpha_outside"]
-
-_WINDOW = 11
-_SIGMA = 1.5
-_C1 = 0.01 ** 2
-_C2 = 0.03 ** 2
-
 
 class ImageScores(NamedTuple):
     """Quality of one rendered view against its photo, inside the mask."""
@@ -55,16 +48,12 @@ def masked_ssim(render: np.ndarray, target: np.ndarray, mask: np.ndarray | None 
 
 def ssim_map(render: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Per-pixel SSIM ``[H, W, C]`` of two ``[H, W, C]`` float64 images (reflected borders)."""
-    def blur(image: np.ndarray) -> np.ndarray:
-        out = cv2.GaussianBlur(image, (_WINDOW, _WINDOW), _SIGMA, borderType=cv2.BORDER_REFLECT)
-        return out.reshape(image.shape)  # OpenCV drops a trailing channel axis of 1
+    import torch
 
-    x, y = render, target
-    mu_x, mu_y = blur(x), blur(y)
-    var_x = blur(x * x) - mu_x * mu_x
-    var_y = blur(y * y) - mu_y * mu_y
-    cov = blur(x * y) - mu_x * mu_y
-    return ((2 * mu_x * mu_y + _C1) * (2 * cov + _C2)) / ((mu_x ** 2 + mu_y ** 2 + _C1) * (var_x + var_y + _C2))
+    from ..ssim import ssim_map as torch_ssim_map
+
+    return torch_ssim_map(torch.from_numpy(np.asarray(render, np.float64)), torch.from_numpy(np.asarray(target, np.float64)),
+                          padding="reflect").numpy()
 
 
 def fraction_alpha_outside(alpha: np.ndarray, mask: np.ndarray) -> float:

@@ -10,7 +10,8 @@ with the raw parameters: normals zero, ``f_dc`` the SH DC coefficient, ``opacity
 its one channel into all three ``f_dc``; the reader collapses them back when asked (``channels=1``).
 
 The reader accepts what other 3DGS tools write: higher-degree SH (``f_rest_*``) and any extra
-properties are ignored, properties may be float or double, the file may be big or little endian.
+properties are ignored, properties may be float or double, the file may be big or little endian. Reading and writing go
+through the project's one PLY path, :mod:`fingersplat3d.io.ply` (``plyfile``).
 Anything it cannot use is an :class:`~fingersplat3d.errors.InputError` naming the file.
 """
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import input_error
-from ..atomic import atomic_path
+from .ply import read_vertex_element, write_vertex_ply
 
 if TYPE_CHECKING:  # torch is imported on use, so ``import fingersplat3d.io`` stays light
     from ..splat.gaussians import Gaussians
@@ -31,13 +32,6 @@ __all__ = ["GAUSSIAN_PLY_FIELDS", "write_gaussians_ply", "read_gaussians_ply"]
 GAUSSIAN_PLY_FIELDS = ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
                        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _REQUIRED = tuple(name for name in GAUSSIAN_PLY_FIELDS if name not in ("nx", "ny", "nz"))
-
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-_MAX_HEADER_BYTES = 1 << 16
 
 
 def write_gaussians_ply(path: str | Path, gaussians: "Gaussians") -> Path:
@@ -59,14 +53,7 @@ def write_gaussians_ply(path: str | Path, gaussians: "Gaussians") -> Path:
     columns.update({f"rot_{i}": quats[:, i] for i in range(4)})
     for name, values in columns.items():
         block[name] = values
-    lines = ["ply", "format binary_little_endian 1.0", "comment 3D Gaussian splats written by fingersplat3d",
-             f"element vertex {len(block)}", *(f"property float {name}" for name in GAUSSIAN_PLY_FIELDS),
-             "end_header"]
-    path = Path(path)
-    with atomic_path(path) as temporary, open(temporary, "wb") as handle:
-        handle.write(("\n".join(lines) + "\n").encode("ascii"))
-        handle.write(block.tobytes())
-    return path
+    return write_vertex_ply(path, block, "3D Gaussian splats written by fingersplat3d")
 
 
 def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussians":
@@ -79,13 +66,8 @@ def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussi
     if channels not in (None, 1, 3):
         raise ValueError(f"channels must be None, 1 or 3, got {channels}")
     path = Path(path)
-    if not path.is_file():
-        raise input_error(path, "no such Gaussian PLY file")
-    data = path.read_bytes()
-    dtype, count, offset = _parse_header(path, data)
-    if len(data) < offset + count * dtype.itemsize:
-        raise input_error(path, f"the file is truncated (the header promises {count} vertices)")
-    vertices = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+    vertices = read_vertex_element(path, "3D Gaussian PLY")
+    dtype = vertices.dtype
     missing = [name for name in _REQUIRED if name not in dtype.names]
     if missing:
         raise input_error(path, f"not a 3D Gaussian PLY: missing vertex properties {', '.join(missing)}")
@@ -111,54 +93,3 @@ def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussi
 
     return Gaussians(torch.from_numpy(means), torch.from_numpy(quats), torch.from_numpy(log_scales),
                      torch.from_numpy(np.ascontiguousarray(opacity_logits)), torch.from_numpy(sh_dc))
-
-
-def _parse_header(path: Path, data: bytes) -> tuple[np.dtype, int, int]:
-    """The vertex record dtype, the vertex count and the byte offset of the vertex data."""
-    if not data.startswith(b"ply"):
-        raise input_error(path, "not a PLY file (it does not start with 'ply')")
-    end = data.find(b"end_header", 0, _MAX_HEADER_BYTES)
-    if end < 0:
-        raise input_error(path, "corrupt PLY header (no end_header)")
-    newline = data.find(b"\n", end)
-    if newline < 0:
-        raise input_error(path, "corrupt PLY header (nothing after end_header)")
-    try:
-        lines = data[:end].decode("ascii").splitlines()
-    except UnicodeDecodeError:
-        raise input_error(path, "corrupt PLY header (not ASCII)") from None
-    byte_order = None
-    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-    for line in lines[1:]:
-        words = line.split()
-        if not words or words[0] in ("comment", "obj_info"):
-            continue
-        if words[0] == "format" and len(words) >= 2:
-            if words[1] == "ascii":
-                raise input_error(path, "ASCII PLY is not supported for Gaussians (write it binary)")
-            byte_order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(words[1])
-            if byte_order is None:
-                raise input_error(path, f"unknown PLY format {words[1]!r}")
-        elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
-            elements.append((words[1], int(words[2]), []))
-        elif words[0] == "property" and elements:
-            if words[1] == "list":
-                elements[-1][2].append((words[-1], "list"))
-            elif len(words) == 3 and words[1] in _PLY_TYPES:
-                elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
-            else:
-                raise input_error(path, f"corrupt PLY header line {line!r}")
-        else:
-            raise input_error(path, f"corrupt PLY header line {line!r}")
-    if byte_order is None:
-        raise input_error(path, "corrupt PLY header (no format line)")
-    if not elements or elements[0][0] != "vertex":
-        raise input_error(path, "not a 3D Gaussian PLY: the first element is not 'vertex'")
-    _, count, properties = elements[0]
-    if any(kind == "list" for _, kind in properties):
-        raise input_error(path, "not a 3D Gaussian PLY: the vertex element has list properties")
-    names = [name for name, _ in properties]
-    if len(set(names)) != len(names):
-        raise input_error(path, "corrupt PLY header (repeated vertex property names)")
-    dtype = np.dtype([(name, byte_order + kind) for name, kind in properties])
-    return dtype, count, newline + 1

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "read_image", "write_image", "read_mask", "write_mask", "image_bit_depth"]
+__all__ = ["IMAGE_SUFFIXES", "read_image", "write_image", "read_mask", "write_mask"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
@@ -27,11 +27,6 @@ def _read_raw(path: Path) -> np.ndarray:
     if raw is None or raw.size == 0:
         raise input_error(path, "not a readable image (corrupt or unsupported format)")
     return raw
-
-
-def image_bit_depth(path: str | Path) -> int:
-    """8 or 16: the bit depth stored in an image file."""
-    return 16 if _read_raw(Path(path)).dtype == np.uint16 else 8
 
 
 def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:

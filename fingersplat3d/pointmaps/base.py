@@ -75,14 +75,8 @@ class PointmapBackend(Protocol):
 _BACKENDS: dict[str, Callable[..., PointmapBackend]] = {}
 
 
-def _dust3r(**options) -> PointmapBackend:
-    """Lazy factory of the ``dust3r`` backend: its network code (and torch) load on first use."""
-    from .dust3r.backend import Dust3rBackend
-
-    return Dust3rBackend(**options)
-
-
 def register_backend(name: str, factory: Callable[..., PointmapBackend]) -> None:
+    """Make ``get_backend(name, **options)`` call ``factory(**options)``."""
     _BACKENDS[name] = factory
 
 
@@ -91,10 +85,11 @@ def backend_names() -> list[str]:
 
 
 def get_backend(name: str, **options) -> PointmapBackend:
-    """Instantiate a backend by name; unknown names are a clear error listing the known ones."""
-    from . import prior  # noqa: F401  (registers "prior")
+    """Instantiate a backend by name; unknown names are a clear error listing the known ones.
 
-    _BACKENDS.setdefault("dust3r", _dust3r)
+    The package's ``__init__`` registers the built-in backends (``prior``, ``dust3r``), so this
+    module imports none of them.
+    """
     if name not in _BACKENDS:
         raise InputError(f"unknown pointmap backend {name!r}; available: {', '.join(backend_names())}")
     return _BACKENDS[name](**options)

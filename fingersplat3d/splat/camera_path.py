@@ -24,19 +24,18 @@ then) is first turned back about its optical axis, by whichever quarter turn bri
 to the others; ``K`` is interpolated the same way (all equal in practice).
 
 Degenerate input raises ``ValueError``: fewer than 2 cameras, cameras with the same orientation
-(no axis to turn about), or parallel optical axes (no pivot). numpy, with the quaternion conversions of
-:mod:`fingersplat3d.rotations`.
+(no axis to turn about), or parallel optical axes (no pivot). numpy, with
+``scipy.spatial.transform.Rotation`` / ``Slerp`` for the rotation algebra.
 """
 from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
 import numpy as np
-import torch
+from scipy.spatial.transform import Rotation, Slerp
 
 from ..eval.poses import rotation_angle_deg
 from ..scene import Camera
-from ..rotations import matrix_to_quaternion, quaternion_to_matrix
 
 __all__ = ["RigGeometry", "rig_geometry", "arc_cameras", "cameras_at_angles"]
 
@@ -60,9 +59,8 @@ def rig_geometry(cameras: Sequence[Camera]) -> RigGeometry:
     cam_to_world = np.stack([camera.rotation.T for camera in cameras])  # [N, 3, 3]
     axis = _common_axis(cam_to_world)
     pivot = _optical_axes_intersection(cameras)
-    quats = _matrix_to_quaternion(cam_to_world)  # [N, 4]
-    relative = _quaternion_multiply(quats, _quaternion_conjugate(quats[0])[None])  # camera i relative to 0, world
-    twist = 2.0 * np.arctan2(relative[:, 1:] @ axis, relative[:, 0])  # [N] in (-2pi, 2pi]
+    relative = (Rotation.from_matrix(cam_to_world) * Rotation.from_matrix(cam_to_world[0]).inv()).as_quat()  # xyzw, i rel. to 0
+    twist = 2.0 * np.arctan2(relative[:, :3] @ axis, relative[:, 3])  # [N] in (-2pi, 2pi]
     angles = _unwrap_from_largest_gap(twist)
     return RigGeometry(axis, pivot, np.rad2deg(angles), np.argsort(angles, kind="stable"))
 
@@ -88,7 +86,7 @@ def arc_cameras(cameras: Sequence[Camera], count: int = 12) -> list[Camera]:
         span = angles[right] - angles[left]
         t = 0.0 if span <= 0 else float(np.clip((angle - angles[left]) / span, 0.0, 1.0))
         a, b = ordered[left], ordered[right]
-        rotation = _quaternion_to_matrix(_slerp(_matrix_to_quaternion(a.rotation.T), _matrix_to_quaternion(b.rotation.T), t))
+        rotation = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a.rotation.T, b.rotation.T])))(t).as_matrix()
         center = ((1 - t) * _turn(a.center, rig, angle - angles[left])
                   + t * _turn(b.center, rig, angle - angles[right]))
         K = (1 - t) * a.K + t * b.K
@@ -113,7 +111,7 @@ def cameras_at_angles(cameras: Sequence[Camera], angles_deg: Sequence[float],
         reference = cameras[int(reference)]
     result = []
     for angle in np.deg2rad(np.asarray(angles_deg, np.float64).reshape(-1)):
-        turn = _axis_angle_matrix(rig.axis, angle)
+        turn = Rotation.from_rotvec(angle * rig.axis).as_matrix()
         result.append(_camera(reference.K.copy(), turn @ reference.rotation.T, _turn(reference.center, rig, angle),
                               reference.width, reference.height))
     return result
@@ -165,7 +163,7 @@ def _camera(K: np.ndarray, cam_to_world_rotation: np.ndarray, center: np.ndarray
 
 def _turn(point: np.ndarray, rig: RigGeometry, angle: float) -> np.ndarray:
     """``point`` rotated by ``angle`` (radians) about the rig axis through the pivot."""
-    return rig.pivot + _axis_angle_matrix(rig.axis, angle) @ (point - rig.pivot)
+    return rig.pivot + Rotation.from_rotvec(angle * rig.axis).as_matrix() @ (point - rig.pivot)
 
 
 def _common_axis(cam_to_world: np.ndarray) -> np.ndarray:
@@ -173,7 +171,7 @@ def _common_axis(cam_to_world: np.ndarray) -> np.ndarray:
     vectors = []
     for i in range(len(cam_to_world)):
         for j in range(i + 1, len(cam_to_world)):
-            vectors.append(_rotation_vector(cam_to_world[j] @ cam_to_world[i].T))  # i -> j, world frame
+            vectors.append(Rotation.from_matrix(cam_to_world[j] @ cam_to_world[i].T).as_rotvec())  # i -> j, world frame
     vectors = np.array(vectors)  # [pairs, 3]
     if np.max(np.linalg.norm(vectors, axis=1)) < _MIN_ROTATION_RAD:
         raise ValueError("the cameras all have the same orientation; there is no rig axis to turn about")
@@ -209,50 +207,3 @@ def _unwrap_from_largest_gap(angles: np.ndarray) -> np.ndarray:
     unwrapped = np.mod(wrapped - start, 2 * np.pi)
     unwrapped[np.isclose(unwrapped, 2 * np.pi)] = 0.0
     return unwrapped - np.median(unwrapped)  # centred: the front camera of a symmetric rig is ~0
-
-
-def _axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * cross @ cross
-
-
-def _matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
-    """``[..., 3, 3]`` rotations -> unit wxyz quaternions with w >= 0."""
-    return matrix_to_quaternion(torch.from_numpy(np.asarray(m, np.float64))).numpy()
-
-
-def _quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    return quaternion_to_matrix(torch.from_numpy(np.asarray(q, np.float64))).numpy()
-
-
-def _quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of ``[..., 4]`` wxyz quaternions (broadcasting)."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
-def _quaternion_conjugate(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def _rotation_vector(m: np.ndarray) -> np.ndarray:
-    """3x3 rotation -> axis * angle (angle in [0, pi])."""
-    q = _matrix_to_quaternion(m)
-    sine = np.linalg.norm(q[1:])
-    if sine < 1e-15:
-        return np.zeros(3)
-    return 2.0 * np.arctan2(sine, q[0]) * q[1:] / sine
-
-
-def _slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
-    """Spherical interpolation of unit quaternions along the shorter arc."""
-    dot = float(a @ b)
-    if dot < 0:
-        b, dot = -b, -dot
-    if dot > 1 - 1e-12:
-        q = (1 - t) * a + t * b
-        return q / np.linalg.norm(q)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    return (np.sin((1 - t) * theta) * a + np.sin(t * theta) * b) / np.sin(theta)

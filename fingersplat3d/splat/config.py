@@ -8,13 +8,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 
-__all__ = ["SplatConfig", "PRESETS", "preset", "DEFAULT_PRESET"]
+__all__ = ["SplatConfig", "PRESETS", "preset", "differences_from_preset", "DEFAULT_PRESET"]
 
 
 @dataclass(frozen=True)
 class SplatConfig:
     """Fitting of Gaussians to the input photos (SH degree 0, 0.8 L1 + 0.2 D-SSIM inside the finger)."""
 
+    preset: str = ""
+    """The preset these settings started from (``fast``, ``balanced``, ``accurate``; empty: none),
+    so that ``report.json`` can name it and list what differs from it."""
     iterations: int = 300
     """Optimisation steps; each step renders one input view (views are visited in shuffled rounds)."""
     lambda_dssim: float = 0.2
@@ -108,9 +111,9 @@ class SplatConfig:
 
 
 PRESETS: dict[str, SplatConfig] = {
-    "fast": SplatConfig(iterations=100, gaussians_per_cell=0.6, densify_from=50, densify_every=50),
-    "balanced": SplatConfig(iterations=300, gaussians_per_cell=1.0, densify_from=100, densify_every=100),
-    "accurate": SplatConfig(iterations=1000, gaussians_per_cell=1.5, densify_from=200, densify_every=100),
+    "fast": SplatConfig(preset="fast", iterations=100, gaussians_per_cell=0.6, densify_from=50, densify_every=50),
+    "balanced": SplatConfig(preset="balanced", iterations=300, gaussians_per_cell=1.0, densify_from=100, densify_every=100),
+    "accurate": SplatConfig(preset="accurate", iterations=1000, gaussians_per_cell=1.5, densify_from=200, densify_every=100),
 }
 DEFAULT_PRESET = "balanced"
 
@@ -123,4 +126,11 @@ def preset(name: str, **overrides) -> SplatConfig:
     unknown = sorted(set(overrides) - known)
     if unknown:
         raise ValueError(f"unknown splat setting(s) {', '.join(unknown)}")
-    return replace(PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})
+    return replace(PRESETS[name], **{k: v for k, v in overrides.items() if v is not None and k != "preset"})
+
+
+def differences_from_preset(config: SplatConfig) -> dict:
+    """The settings of ``config`` that differ from its preset's (all of them when it names none)."""
+    base = PRESETS.get(config.preset)
+    return {f.name: getattr(config, f.name) for f in fields(SplatConfig)
+            if f.name != "preset" and (base is None or getattr(config, f.name) != getattr(base, f.name))}

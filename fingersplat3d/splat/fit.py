@@ -26,15 +26,10 @@ from .gaussians import Gaussians, sh_to_rgb
 from .losses import photometric_loss
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
-from .strategy import DensifyStats, GradientStats, densify_and_prune, gaussians_of
+from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, param_group
 
 __all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget",
-           "default_device", "scene_extent", "near_plane"]
-
-
-def default_device() -> torch.device:
-    """CUDA when present, else CPU."""
-    return resolve_device("auto")
+           "scene_extent", "near_plane"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,7 +134,7 @@ def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: in
     rotation = torch.nn.Parameter(torch.zeros(n_views, 3, device=device))
     translation = torch.nn.Parameter(torch.zeros(n_views, 3, device=device))
     groups = [{"params": [p], "lr": lr, "name": name}
-              for p, lr, name in zip(parameters, rates, ("means", "quats", "log_scales", "opacity", "sh_dc"))]
+              for p, lr, name in zip(parameters, rates, GAUSSIAN_GROUPS)]
     groups += [{"params": [rotation], "lr": config.lr_pose_rotation if config.refine_poses else 0.0, "name": "pose_rotation"},
                {"params": [translation], "lr": config.lr_pose_translation * extent if config.refine_poses else 0.0,
                 "name": "pose_translation"}]
@@ -158,7 +153,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
 
     if len(views) != len(cameras) or not views:
         raise ValueError("fit_gaussians needs one camera per view and at least one view")
-    device = default_device() if device is None else torch.device(device)
+    device = resolve_device(device)
     started = time.perf_counter()
     model = initial.detach().to(device, torch.float32)
     priors = depths if depths is not None and config.lambda_depth > 0 else [None] * len(views)
@@ -202,7 +197,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         losses.append(float(loss.detach()))
         if out.means2d.grad is not None:
             stats.add(out.means2d.grad, out.radii, target.width, target.height)
-        optimizer.param_groups[0]["lr"] *= means_decay
+        param_group(optimizer, "means")["lr"] *= means_decay
         if (step + 1) % config.densify_every == 0 and config.densify_from <= step + 1 <= max(config.densify_until, config.densify_from):
             densify_records.append(densify_and_prune(optimizer, stats, config, extent, budget, generator))
         if step % 10 == 0:
@@ -233,8 +228,8 @@ def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np
     near = near_plane(model.means, camera, near_fraction)
     rotation = torch.zeros(3, device=device, requires_grad=True)
     translation = torch.zeros(3, device=device, requires_grad=True)
-    optimizer = torch.optim.Adam([{"params": [rotation], "lr": lr_rotation},
-                                  {"params": [translation], "lr": lr_translation * extent}])
+    optimizer = torch.optim.Adam([{"params": [rotation], "lr": lr_rotation, "name": "pose_rotation"},
+                                  {"params": [translation], "lr": lr_translation * extent, "name": "pose_translation"}])
     for _ in range(iterations):
         pose = apply_pose_correction(target.world_to_cam, rotation, translation)
         out = render_camera(model, camera, near, world_to_cam=pose)

@@ -13,10 +13,11 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from ..device import resolve_device
 from ..eval.poses import rotation_angle_deg
 from ..scene import Camera, View
-from .config import SplatConfig
-from .fit import default_device, fit_gaussians, gaussian_budget, near_plane, render_camera
+from .config import SplatConfig, differences_from_preset
+from .fit import fit_gaussians, gaussian_budget, near_plane, render_camera
 from .gaussians import Gaussians
 
 __all__ = ["SplatStage", "run_splat_stage"]
@@ -48,7 +49,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from .voting import CleanConfig, clean_with_masks
 
-    device = default_device() if device is None else torch.device(device)
+    device = resolve_device(device)
     clean_config = CleanConfig() if clean_config is None else clean_config
     train_views = [views[v] for v in fitted_views]
     train_cameras = [cameras[v] for v in fitted_views]
@@ -84,7 +85,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
             if v in fitted_views:
                 outside_after.append(fraction_alpha_outside(alpha, view.mask))
     corrections = {views[v].name: round(float(rotation_angle_deg(refined[v].rotation, cameras[v].rotation)), 3) for v in fitted_views}
-    report = {"config": asdict(config), "device": str(device), "budget": fit.budget,
+    report = {"preset": config.preset or None, "differs_from_preset": differences_from_preset(config),
+              "config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
               "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
               "polish_seconds": round(polish_seconds, 2),

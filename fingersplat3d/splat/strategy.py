@@ -1,7 +1,7 @@
 """Adaptive density control (3DGS): clone, split and prune Gaussians under a budget.
 
-The optimised parameters live in one Adam optimiser, one parameter group per Gaussian field in the
-order of :meth:`Gaussians.tensors`; growing or shrinking the model edits the groups' tensors and
+The optimised parameters live in one Adam optimiser, one parameter group per Gaussian field,
+addressed by name (``GAUSSIAN_GROUPS``, the order of :meth:`Gaussians.tensors`); growing or shrinking the model edits the groups' tensors and
 their Adam moments together (:func:`replace_rows`), so the optimiser keeps its state for the
 Gaussians that stay. Statistics are the mean norm of the view-space positional gradient (in NDC
 units, as 3DGS) over the views in which each Gaussian was rendered.
@@ -50,15 +50,31 @@ class DensifyStats:
     total: int
 
 
+GAUSSIAN_GROUPS = ("means", "quats", "log_scales", "opacity", "sh_dc")
+"""Names of the optimiser's parameter groups that hold the Gaussians, in :meth:`Gaussians.tensors` order."""
+
+
+def param_group(optimizer: torch.optim.Optimizer, name: str) -> dict:
+    """The optimiser's parameter group called ``name`` (a ``KeyError`` naming the groups when none is)."""
+    for group in optimizer.param_groups:
+        if group.get("name") == name:
+            return group
+    raise KeyError(f"no parameter group {name!r}; the optimiser has {[g.get('name') for g in optimizer.param_groups]}")
+
+
+def _gaussian_groups(optimizer: torch.optim.Optimizer) -> list[dict]:
+    return [param_group(optimizer, name) for name in GAUSSIAN_GROUPS]
+
+
 def gaussians_of(optimizer: torch.optim.Optimizer) -> Gaussians:
     """The model whose fields are the optimiser's parameter groups (see module docstring)."""
-    return Gaussians(*(group["params"][0] for group in optimizer.param_groups[:5]))
+    return Gaussians(*(group["params"][0] for group in _gaussian_groups(optimizer)))
 
 
 def replace_rows(optimizer: torch.optim.Optimizer, keep: torch.Tensor, new_rows: tuple[torch.Tensor, ...]) -> None:
     """Keep rows ``keep`` (bool [N]) of every Gaussian group and append ``new_rows`` (one tensor per
     group); Adam moments of kept rows are kept, those of new rows start at zero."""
-    for group, extra in zip(optimizer.param_groups[:5], new_rows):
+    for group, extra in zip(_gaussian_groups(optimizer), new_rows):
         old = group["params"][0]
         data = torch.cat([old.detach()[keep], extra.detach().to(old.dtype)])
         parameter = torch.nn.Parameter(data.requires_grad_(True))

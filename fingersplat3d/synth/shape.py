@@ -134,7 +134,9 @@ class FingerSurface:
 def _bilinear_with_jacobian(grid: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bilinear value ``[N, D]`` and Jacobian ``[N, D, 2]`` of ``grid [R, C, D]`` at float (row, col).
 
-    Columns wrap around (azimuth is periodic); rows are clamped.
+    Columns wrap around (azimuth is periodic); rows are clamped. Written here rather than with
+    ``scipy.ndimage.map_coordinates`` (:mod:`fingersplat3d.sampling`): the surface's normals need
+    the Jacobian, which the library samplers do not give.
     """
     rows, cols = grid.shape[:2]
     r = np.clip(index[:, 0], 0, rows - 1 - 1e-9)

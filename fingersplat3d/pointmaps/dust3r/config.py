@@ -97,10 +97,6 @@ class Dust3rArchitecture:
         if problems:
             raise InputError("unsupported DUSt3R architecture: " + "; ".join(problems))
 
-    @property
-    def has_confidence(self) -> bool:
-        return self.conf_mode is not None
-
     def describe(self) -> str:
         """The ``args.model`` string of this architecture, in upstream's syntax (upstream can eval it)."""
         def literal(value) -> str:

@@ -1,9 +1,14 @@
-"""The machine line every benchmark prints: CPU, cores, load and library versions."""
+"""The machine every benchmark names: CPU, cores (and those this process may use), load, library versions.
+
+Used by ``tools/bench_*.py`` (and the coming ``fs3d bench``); no files written.
+"""
 from __future__ import annotations
 
 import os
 import platform
 from pathlib import Path
+
+__all__ = ["machine"]
 
 
 def _version(module: str) -> str:
@@ -23,6 +28,8 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    return {"cpu": model, "cores": os.cpu_count(), "load": os.getloadavg(), "python": platform.python_version(),
+    from ..device import cpu_threads
+
+    return {"cpu": model, "cores": os.cpu_count(), "usable_cores": cpu_threads(), "load": os.getloadavg(), "python": platform.python_version(),
             "numpy": _version("numpy"), "open3d": _version("open3d"), "torch": _version("torch"),
             "kernel": platform.release()}

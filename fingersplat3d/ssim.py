@@ -1,0 +1,66 @@
+"""SSIM (Wang et al. 2004), the project's one implementation: training loss and evaluation score.
+
+An 11x11 Gaussian window (sigma 1.5), ``C1 = 0.01^2``, ``C2 = 0.03^2`` (data range 1), the
+population (not sample) covariance: the settings of the 3DGS training code and of Wang et al.'s
+reference. The window is separable, so the five blurred images are filtered in one batch along
+rows then columns (22 taps instead of 121; the 2D convolution's backward dominated a fitting
+step on the CPU). Borders: ``zeros`` pads with zeros as 3DGS training does; ``reflect`` mirrors the
+image (without repeating the edge pixel), so that nothing outside the image counts, as an
+evaluation score should. ``tests/test_ssim.py`` checks it against scikit-image's
+``structural_similarity`` with Wang et al.'s settings.
+
+Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors. Pure torch.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["ssim_map", "image_pair", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
+
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_C1 = 0.01 ** 2
+SSIM_C2 = 0.03 ** 2
+
+
+def _as_hwc(image: torch.Tensor, name: str) -> torch.Tensor:
+    if image.ndim == 2:
+        return image[..., None]
+    if image.ndim != 3:
+        raise ValueError(f"{name} must be [H, W] or [H, W, C], got shape {tuple(image.shape)}")
+    return image
+
+
+def image_pair(render: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Both images as ``[H, W, C]`` of one shape, ``target`` on ``render``'s dtype and device (else ``ValueError``)."""
+    render, target = _as_hwc(render, "render"), _as_hwc(target, "target")
+    if render.shape != target.shape:
+        raise ValueError(f"render {tuple(render.shape)} and target {tuple(target.shape)} differ in shape")
+    return render, target.to(dtype=render.dtype, device=render.device)
+
+
+def ssim_map(render: torch.Tensor, target: torch.Tensor, *, padding: str = "zeros") -> torch.Tensor:
+    """Per-pixel SSIM ``[H, W, C]`` of two images of one shape; ``padding``: ``zeros`` or ``reflect``."""
+    if padding not in ("zeros", "reflect"):
+        raise ValueError(f"padding must be 'zeros' or 'reflect', got {padding!r}")
+    render, target = image_pair(render, target)
+    channels = render.shape[-1]
+    x = render.permute(2, 0, 1)[None]  # [1, C, H, W]
+    y = target.permute(2, 0, 1)[None]
+    pad = SSIM_WINDOW // 2
+    taps = torch.arange(SSIM_WINDOW, dtype=torch.float64) - (SSIM_WINDOW - 1) / 2.0
+    g = torch.exp(-(taps * taps) / (2.0 * SSIM_SIGMA * SSIM_SIGMA))
+    g = (g / g.sum()).to(dtype=render.dtype, device=render.device)
+    stack = torch.cat([x, y, x * x, y * y, x * y], dim=1)  # [1, 5C, H, W]
+    groups = stack.shape[1]
+    if padding == "reflect":
+        stack = F.pad(stack, (pad, pad, pad, pad), mode="reflect")
+        pad = 0
+    rows = F.conv2d(stack, g.view(1, 1, 1, -1).expand(groups, 1, 1, SSIM_WINDOW), padding=(0, pad), groups=groups)
+    blurred = F.conv2d(rows, g.view(1, 1, -1, 1).expand(groups, 1, SSIM_WINDOW, 1), padding=(pad, 0), groups=groups)
+    mu_x, mu_y, e_xx, e_yy, e_xy = blurred.split(channels, dim=1)
+    mu_xx, mu_yy, mu_xy = mu_x * mu_x, mu_y * mu_y, mu_x * mu_y
+    numerator = (2.0 * mu_xy + SSIM_C1) * (2.0 * (e_xy - mu_xy) + SSIM_C2)
+    denominator = (mu_xx + mu_yy + SSIM_C1) * ((e_xx - mu_xx) + (e_yy - mu_yy) + SSIM_C2)
+    return (numerator / denominator)[0].permute(1, 2, 0)
