@@ -12,7 +12,7 @@ from . import __version__
 from .align.global_opt import GlobalAlignConfig
 from .atomic import check_free
 from .align.register import MATCHERS, RegistrationConfig
-from .errors import EXIT_INPUT, EXIT_NOT_REGISTERED, FS3DError, InputError
+from .errors import EXIT_INCOMPLETE, EXIT_INPUT, EXIT_NOT_REGISTERED, FS3DError, InputError
 from .splat.config import DEFAULT_PRESET, PRESETS, preset
 
 __all__ = ["main", "build_parser"]
@@ -72,6 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_info(commands)
     _add_preview(commands)
     _add_render(commands)
+    _add_batch(commands)
+    _add_rig(commands)
     return parser
 
 
@@ -127,24 +129,12 @@ def _add_fuse(commands) -> None:
                       help="where the dust3r backend and the splat fit run: auto (CUDA when available, default), cpu, "
                            "cuda or cuda:N")
     fuse.add_argument("--pair-batch", type=_COUNT, default=4, help="dust3r backend: image pairs per network batch (default 4)")
-    fuse.add_argument("--matcher", default="surface", choices=MATCHERS,
-                      help="first correspondences between views: surface (default: ridge texture unwrapped on cylinder "
-                           "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
-    fuse.add_argument("--guided-rounds", type=_STEPS, default=RegistrationConfig.guided_rounds,
-                      help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds})")
+    _add_registration_arguments(fuse)
     hint = fuse.add_mutually_exclusive_group()
     hint.add_argument("--px-per-mm", type=_POSITIVE, help="metric hint: pixels per millimetre at the finger")
     hint.add_argument("--finger-width-mm", type=_POSITIVE, help="metric hint: the finger's width in millimetres")
     fuse.add_argument("--mesh", action="store_true", help="also write mesh.ply (Poisson, cleaned)")
-    splat = fuse.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
-    splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
-    splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
-                       help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
-    splat.add_argument("--splat-iterations", type=_STEPS, help="override the preset's optimisation steps")
-    splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=_POSITIVE, dest="splat_gaussians_per_cell",
-                       help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
-                            "(--splat-budget-density: its former name)")
-    splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
+    _add_splat_arguments(fuse)
     fuse.add_argument("--icp", action="store_true",
                       help="refine poses with Open3D ICP (guarded; off by default: on near-cylindrical fingers "
                            "it slides about the axis, see the README)")
@@ -152,7 +142,8 @@ def _add_fuse(commands) -> None:
                       default=GlobalAlignConfig.polish_iterations,
                       help=f"L-BFGS iterations of each global alignment round (default {GlobalAlignConfig.polish_iterations}; "
                            "--alignment-iterations: its former name)")
-    fuse.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+    fuse.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': keep its camera poses and focal fixed "
+                                               "(the views are its cameras in order)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     fuse.set_defaults(run=_run_fuse)
 
@@ -250,8 +241,9 @@ def _run_fuse(args: argparse.Namespace) -> int:
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
                         splat=_splat_config(args))
+    rig = _read_rig(args.rig)
     start = time.perf_counter()
-    result = fuse(captures[0], config, progress=True)
+    result = fuse(captures[0], config, progress=True, rig=rig)
     write_reconstruction(result, args.output, overwrite=args.overwrite)
     alignment = result.report["alignment"]
     residual = "one view: nothing to align" if len(result.capture) == 1 else (
@@ -269,6 +261,170 @@ def _run_fuse(args: argparse.Namespace) -> int:
               "apart, with depth from its pointmap alone", file=sys.stderr)
         return EXIT_NOT_REGISTERED
     return 0
+
+
+def _read_rig(path: Path | None):
+    if path is None:
+        return None
+    from .io.rig import read_rig
+
+    return read_rig(path)
+
+
+def _fuse_config(args: argparse.Namespace):
+    """The fuse settings shared by ``fuse``-like commands (``batch``, ``rig calibrate``)."""
+    from .pipeline import FuseConfig
+
+    registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed)
+    return FuseConfig(registration=registration, splat=_splat_config(args) if hasattr(args, "no_splat") else None,
+                      mesh=getattr(args, "mesh", False))
+
+
+def _add_registration_arguments(parser) -> None:
+    parser.add_argument("--matcher", default="surface", choices=MATCHERS,
+                        help="first correspondences between views: surface (default: ridge texture unwrapped on cylinder "
+                             "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
+    parser.add_argument("--guided-rounds", type=_STEPS, default=RegistrationConfig.guided_rounds,
+                        help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds})")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+
+
+def _add_splat_arguments(parser) -> None:
+    splat = parser.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
+    splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
+    splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
+                       help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
+    splat.add_argument("--splat-iterations", type=_STEPS, help="override the preset's optimisation steps")
+    splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=_POSITIVE, dest="splat_gaussians_per_cell",
+                       help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
+                            "(--splat-budget-density: its former name)")
+    splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
+
+
+def _add_dataset_arguments(parser) -> None:
+    parser.add_argument("dataset", type=Path, nargs="+",
+                        help="a UWA or CFPose folder, a folder of capture folders, a CSV with columns name,paths, or image files")
+    parser.add_argument("--select", help="a subset: subject=S, finger=F, capture=C, name=N, count=K (comma-separated)")
+    parser.add_argument("--address", help="join this Ray cluster (e.g. ray://head:10001 or auto) instead of a local instance")
+    parser.add_argument("--workers", type=_COUNT, help="local Ray: CPUs to use (default: the cores this process may use)")
+    parser.add_argument("--threads-per-task", type=_COUNT, default=1,
+                        help="CPUs declared per capture and torch threads inside it (default 1: one capture per core)")
+    _add_registration_arguments(parser)
+
+
+def _add_batch(commands) -> None:
+    """``fs3d batch``: its arguments."""
+    batch = commands.add_parser(
+        "batch", help="reconstruct every capture of a dataset on Ray, resumable, with a results table and an HTML report",
+        description="Fuse (and splat and render) every capture of a dataset, each as one Ray task (a local Ray "
+                    "instance by default, --address to join a cluster). OUT/<capture>/ is written exactly as "
+                    "'fs3d fuse' writes it (+ renders/ and thumbs/) and appears only when complete; a re-run "
+                    "skips complete captures. A failing capture is recorded (OUT/.failed/, results.csv) and the "
+                    "run goes on. Writes OUT/results.csv and OUT/report.html.")
+    _add_dataset_arguments(batch)
+    batch.add_argument("-o", "--output", type=Path, required=True, help="folder of the capture folders and results")
+    batch.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': fixed camera poses and focal")
+    batch.add_argument("--device", default="cpu",
+                       help="where each capture's splat fit runs: cpu (default) or cuda (each task then declares one GPU)")
+    _add_splat_arguments(batch)
+    batch.add_argument("--render-count", type=_number(int, 0, 1000), default=12, help="novel views per capture (0 = none; default 12)")
+    batch.add_argument("--mesh", action="store_true", help="also write mesh.ply per capture")
+    batch.add_argument("--force", action="store_true", help="redo complete captures")
+    batch.add_argument("--retry-failed", action="store_true", help="run again the captures that failed before")
+    batch.set_defaults(run=_run_batch)
+
+
+def _add_rig(commands) -> None:
+    """``fs3d rig calibrate``: its arguments."""
+    rig = commands.add_parser("rig", help="a fixed camera rig: calibrate it from many captures",
+                              description="Tools for a fixed multi-camera rig (UWA's three cameras).")
+    actions = rig.add_subparsers(dest="action", metavar="ACTION", required=True)
+    calibrate = actions.add_parser(
+        "calibrate", help="estimate the rig's camera poses and focal from many captures (no target needed)",
+        description="Register every capture (on Ray), then fit one set of camera poses and one focal length to "
+                    "the correspondences of all captures jointly, leaving out captures that disagree. Writes "
+                    "rig.json (the cameras.json schema without the finger) for 'fs3d fuse --rig' and 'fs3d batch --rig'.")
+    _add_dataset_arguments(calibrate)
+    calibrate.add_argument("-o", "--output", type=Path, required=True, help="rig.json to write")
+    calibrate.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    calibrate.set_defaults(run=_run_rig_calibrate)
+
+
+def _run_batch(args: argparse.Namespace) -> int:
+    from .batch.run import run_batch
+    from .batch.task import BatchOptions
+    from .io.jobs import list_jobs
+
+    jobs = list_jobs(args.dataset, args.select)
+    if args.device not in ("cpu", "cuda") and not args.device.startswith("cuda:"):
+        raise InputError(f"--device {args.device!r}: use cpu or cuda")
+    config = replace(_fuse_config(args), device=args.device)
+    options = BatchOptions(fuse=config, render=0 if args.no_splat else args.render_count, rig=_read_rig(args.rig),
+                           threads=args.threads_per_task, force=args.force)
+    run = run_batch(jobs, args.output, options, address=args.address, num_cpus=args.workers, retry_failed=args.retry_failed)
+    done = sum(row["status"] == "done" for row in run.rows)
+    print(f"wrote {args.output}: {done} of {len(jobs)} captures complete ({run.submitted} run now, {run.skipped_complete} "
+          f"complete before, {run.skipped_failed} failed before) in {run.engine['wall_s']:.1f} s; "
+          f"{args.output / 'results.csv'}, {args.output / 'report.html'}")
+    if done < len(jobs):
+        print(f"fs3d batch: {len(jobs) - done} of {len(jobs)} captures failed or were not registered; "
+              f"{args.output / 'results.csv'} says why", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
+
+
+def _run_rig_calibrate(args: argparse.Namespace) -> int:
+    from .align.rig import calibrate_rig
+    from .batch.engine import ray_map
+    from .io.jobs import list_jobs
+    from .io.rig import write_rig
+
+    check_free(args.output, args.overwrite)
+    jobs = list_jobs(args.dataset, args.select)
+    config = _fuse_config(args)
+    captures, failures = [], {}
+
+    def on_result(job, capture, error):
+        if error is not None:
+            failures[job.name] = error
+        elif not all(capture.alignment.aligned):
+            failures[job.name] = "not every view registered"
+        else:
+            captures.append(capture)
+
+    run = ray_map(_register_job, jobs, (config, args.threads_per_task), on_result, address=args.address,
+                  cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc="fs3d rig calibrate")
+    names = sorted({c.view_names for c in captures})
+    if len(captures) < 2:
+        print(f"fs3d rig calibrate: only {len(captures)} of {len(jobs)} captures registered with all their views; "
+              "a rig needs at least 2", file=sys.stderr)
+        return EXIT_NOT_REGISTERED
+    if len(names) != 1:
+        raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
+    start = time.perf_counter()
+    calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0],
+                                replace(GlobalAlignConfig(), polish_iterations=400, polish_rounds=3))
+    rig = calibration.rig
+    rig.info.update(failed=failures, register_seconds=round(run["wall_s"], 1), fit_seconds=round(time.perf_counter() - start, 1))
+    write_rig(args.output, rig)
+    from .eval.poses import rotation_angle_deg
+
+    angles = ", ".join(f"{rig.names[i]}-{rig.names[j]} {rotation_angle_deg(rig.rotations[i], rig.rotations[j]):.2f} deg"
+                       for i in range(len(rig.names)) for j in range(i + 1, len(rig.names)))
+    print(f"wrote {args.output}: {len(calibration.used)} captures used ({len(calibration.left_out)} left out, "
+          f"{len(failures)} not registered), focal {rig.focal:.1f} px, {angles}")
+    return 0
+
+
+def _register_job(job, config, threads: int):
+    """A Ray task of 'fs3d rig calibrate': one capture registered (what the calibration pools)."""
+    import torch
+
+    from .io.jobs import load_job
+    from .pipeline import register_capture
+
+    torch.set_num_threads(max(1, threads))
+    return register_capture(load_job(job), config)
 
 
 def _splat_config(args: argparse.Namespace):

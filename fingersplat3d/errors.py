@@ -9,17 +9,21 @@ Exit statuses of ``fs3d`` (documented in the README):
 * 2 (:data:`EXIT_INPUT`): bad input or arguments, one sentence on stderr, nothing written;
 * 3 (:data:`EXIT_NOT_REGISTERED`): ``fs3d fuse`` wrote its outputs but some views could not be
   registered with the others (``report.json`` says which and why); not used when the images are
-  identical or there is one view (the paper's monocular mode);
+  identical or there is one view (the paper's monocular mode); ``fs3d rig calibrate`` when fewer
+  than two captures registered with all their views;
+* 4 (:data:`EXIT_INCOMPLETE`): ``fs3d batch`` finished but some captures failed or were not
+  registered (``results.csv`` says which and why); the others are complete;
 * 130: interrupted.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["FS3DError", "InputError", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED"]
+__all__ = ["FS3DError", "InputError", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED", "EXIT_INCOMPLETE"]
 
 EXIT_INPUT = 2
 EXIT_NOT_REGISTERED = 3
+EXIT_INCOMPLETE = 4
 
 
 class FS3DError(Exception):

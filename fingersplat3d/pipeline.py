@@ -21,6 +21,7 @@ from . import __version__
 from .align.global_opt import GlobalAlignment, global_align
 from .align.icp import ICPConfig, refine_poses
 from .align.register import RegistrationConfig, register_views
+from .align.rig import Rig, RigCapture
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
@@ -158,17 +159,20 @@ def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfi
 
 
 def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_pointmaps, config: FuseConfig,
-              report: dict, say) -> GlobalAlignment:
+              report: dict, say, rig: Rig | None = None) -> GlobalAlignment:
     """Pair relations of the distinct ``pairs`` and the global alignment: image correspondences, or the
     backend's pairwise pointmaps."""
     identical = [{"a": capture.views[a].name, "b": capture.views[b].name, "ok": False,
                   "reason": "identical images: no parallax (monocular mode)"}
                  for a in range(len(capture)) for b in range(a + 1, len(capture)) if (a, b) not in pairs]
     if pair_pointmaps is None:
-        registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say)
+        registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig)
         report["pairs"] = registration.pairs + identical
         report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds}
         return registration.alignment
+    if rig is not None:
+        raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "
+                         "do not take one")
     from .align.pointmap_pairs import register_pointmap_pair
 
     rng = np.random.default_rng(config.registration.seed)
@@ -185,6 +189,30 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
     report["pairs"] = records + identical
     return global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registered,
                         config.registration.global_align)
+
+
+def _check_rig(capture: Capture, rig: Rig) -> None:
+    if len(capture) != len(rig.names):
+        raise InputError(f"the rig has {len(rig.names)} cameras ({', '.join(rig.names)}) but the capture has "
+                         f"{len(capture)} views ({', '.join(capture.names)})")
+    for v, view in enumerate(capture.views):
+        size = (view.width, view.height)
+        if size not in (tuple(rig.sizes[v]), tuple(rig.sizes[v])[::-1]):
+            raise InputError(f"view {view.name!r} is {size[0]}x{size[1]} but camera {rig.names[v]!r} of the rig takes "
+                             f"{rig.sizes[v][0]}x{rig.sizes[v][1]} images")
+
+
+def register_capture(capture: Capture, config: FuseConfig | None = None) -> RigCapture:
+    """A capture up to its registration (masks, pointmaps, correspondences, its own alignment): what a
+    rig calibration (:func:`~fingersplat3d.align.rig.calibrate_rig`) pools."""
+    config = FuseConfig() if config is None else config
+    capture = _with_masks(capture)
+    pairs = _distinct_pairs(capture)
+    pointmaps, _ = _pointmaps(capture, pairs, config, {})
+    registration = register_views(capture.views, pointmaps, config.registration, pairs)
+    name = str(capture.metadata.get("name") or "_".join(capture.names))
+    return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
+                      registration.alignment, [(view.width, view.height) for view in capture.views], tuple(capture.names))
 
 
 def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: GlobalAlignment, report: dict) -> dict:
@@ -263,9 +291,12 @@ def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.nda
     return None
 
 
-def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = False) -> Reconstruction:
+def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = False, rig: Rig | None = None) -> Reconstruction:
     """Recover cameras and one fused finger surface from the capture's images (cameras ignored), and
     fit Gaussians to the photos on top (``config.splat``).
+
+    ``rig``: a calibrated rig (:mod:`fingersplat3d.align.rig`) whose poses and focal stay fixed; the
+    capture's views are its cameras in order.
 
     Views that could not be registered do not raise: the result says so
     (:attr:`Reconstruction.registered`, ``report["alignment"]``), so that outputs can still be written.
@@ -275,6 +306,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
     if len(capture) < MIN_VIEWS:
         raise InputError("fs3d fuse needs at least one image")
+    if rig is not None:
+        _check_rig(capture, rig)
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}
@@ -294,7 +327,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         bar.update()
         with step("registration"):
             alignment = _register(capture, pairs, pointmaps, pair_pointmaps, config, report,
-                                  lambda text: bar.set_postfix_str(f"registration: {text}"))
+                                  lambda text: bar.set_postfix_str(f"registration: {text}"), rig)
         bar.update()
         report["alignment"] = _alignment_status(capture, pairs, alignment, report)
         cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])
@@ -364,27 +397,32 @@ def _scaled_camera(camera: Camera, scale: float) -> Camera:
 def write_reconstruction(result: Reconstruction, folder: str | Path, overwrite: bool = False) -> Path:
     """Write the reconstruction folder: fused.ply, cameras.json, depth/, mesh.ply, report.json."""
     from .atomic import atomic_dir
+
+    with atomic_dir(Path(folder), overwrite=overwrite) as temporary:
+        write_reconstruction_files(result, temporary)
+    return Path(folder)
+
+
+def write_reconstruction_files(result: Reconstruction, temporary: Path) -> None:
+    """The files of :func:`write_reconstruction` into an existing (temporary) folder."""
     from .io.cameras import write_cameras
     from .io.reconstruction import write_fused_cloud, write_report, write_view_depth
 
-    folder = Path(folder)
     started = time.perf_counter()
-    with atomic_dir(folder, overwrite=overwrite) as temporary:
-        write_fused_cloud(temporary / "fused.ply", result.cloud)
-        entries = [(view.name, result.capture.metadata.get("sources", {}).get(view.name, f"images/{view.name}.png"), camera)
-                   for view, camera in zip(result.capture.views, result.cameras)]
-        write_cameras(temporary / "cameras.json", entries, units=result.units, scale_mm_per_unit=result.scale_mm_per_unit)
-        for view, depth in zip(result.capture.views, result.depths):
-            write_view_depth(temporary, view.name, depth, units="mm" if result.units == "mm" else "arbitrary")
-        if result.gaussians is not None:
-            from .io.gaussians_ply import write_gaussians_ply
+    write_fused_cloud(temporary / "fused.ply", result.cloud)
+    entries = [(view.name, result.capture.metadata.get("sources", {}).get(view.name, f"images/{view.name}.png"), camera)
+               for view, camera in zip(result.capture.views, result.cameras)]
+    write_cameras(temporary / "cameras.json", entries, units=result.units, scale_mm_per_unit=result.scale_mm_per_unit)
+    for view, depth in zip(result.capture.views, result.depths):
+        write_view_depth(temporary, view.name, depth, units="mm" if result.units == "mm" else "arbitrary")
+    if result.gaussians is not None:
+        from .io.gaussians_ply import write_gaussians_ply
 
-            write_gaussians_ply(temporary / "gaussians.ply", result.gaussians)
-        if result.mesh is not None:
-            from .mesh import write_mesh
+        write_gaussians_ply(temporary / "gaussians.ply", result.gaussians)
+    if result.mesh is not None:
+        from .mesh import write_mesh
 
-            write_mesh(temporary / "mesh.ply", result.mesh)
-        report = dict(result.report)
-        report["stages"] = {**report.get("stages", {}), "write": {"seconds": round(time.perf_counter() - started, 3)}}
-        write_report(temporary / "report.json", report)
-    return folder
+        write_mesh(temporary / "mesh.ply", result.mesh)
+    report = dict(result.report)
+    report["stages"] = {**report.get("stages", {}), "write": {"seconds": round(time.perf_counter() - started, 3)}}
+    write_report(temporary / "report.json", report)

@@ -27,6 +27,7 @@ LAYERS = [
     {"synth"},
     {"io", "mesh", "viz"},
     {"pipeline"},
+    {"batch"},
     {"cli"},
 ]
 

@@ -66,7 +66,6 @@ def _leave_one_out(capture, three, two) -> dict:
     """
     import cv2
 
-    from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
     from fingersplat3d.scene import Camera
 
     if not (three.registered and two.registered):
@@ -88,7 +87,14 @@ def _leave_one_out(capture, three, two) -> dict:
         return {"outside_mask": None, "texture_ncc": None}
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
-    camera2 = Camera(K, pose, view2.width, view2.height)
+    return texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
+
+
+def texture_check(two, camera2, view2) -> dict:
+    """The two-view model (frames 0, 1) seen from ``camera2``: share of its surface outside frame 2's
+    mask, and the correlation of its ridge texture with frame 2's."""
+    from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+
     period = estimate_ridge_period(view2.image, view2.mask)
     target = ridge_texture(view2.image, view2.mask, period)
     predicted = np.full(target.shape, np.nan, np.float32)

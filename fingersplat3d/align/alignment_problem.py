@@ -156,9 +156,17 @@ class AlignmentProblem(torch.nn.Module):
         return camera[:, :2] / z[:, None] * focals[view][:, None] + self.centres[view]
 
     # -- the loss -------------------------------------------------------------------------------
-    def correspondence_terms(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """World points of both ends ``[M, 3]`` and the information-weighted squared errors ``[M]`` a->b and b->a."""
-        cameras = (self.rotations(), self.translations(), self.focals())  # once per evaluation
+    def cameras(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(rotations [N, 3, 3], translations [N, 3], focals [N])``: the cameras as this problem holds them."""
+        return self.rotations(), self.translations(), self.focals()
+
+    def correspondence_terms(self, cameras: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """World points of both ends ``[M, 3]`` and the information-weighted squared errors ``[M]`` a->b and b->a.
+
+        ``cameras``: ``(rotations, translations, focals)`` from elsewhere (a rig shared by several
+        captures, :mod:`~fingersplat3d.align.rig`) instead of this problem's own poses.
+        """
+        cameras = self.cameras() if cameras is None else cameras  # once per evaluation
         scales = self.scales()
         depth_a = self.depth(self.view_a, self.z_a, self.basis_index_a, self.basis_weight_a, scales)
         depth_b = self.depth(self.view_b, self.z_b, self.basis_index_b, self.basis_weight_b, scales)
@@ -170,8 +178,8 @@ class AlignmentProblem(torch.nn.Module):
         e_ba = torch.einsum("ni,nij,nj->n", r_ba, self.info_a, r_ba)
         return x_a, x_b, e_ab, e_ba
 
-    def forward(self) -> torch.Tensor:
-        _, _, e_ab, e_ba = self.correspondence_terms()
+    def forward(self, cameras: tuple | None = None) -> torch.Tensor:
+        _, _, e_ab, e_ba = self.correspondence_terms(cameras)
         scale = self.robust_px ** 2
         loss = (self.weight * (torch.log1p(e_ab / scale) + torch.log1p(e_ba / scale))).sum()
         if self.bend_index.numel():

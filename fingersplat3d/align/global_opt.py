@@ -192,9 +192,7 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
             aligned[child] = True
     root_depth = depths[root][np.isfinite(depths[root])]
     scene = float(np.median(root_depth)) if root_depth.size else 1.0
-    masks = [np.isfinite(d) for d in depths]
-    grids = [FieldGrid.covering(mask, config.field_knots) if config.field_knots > 0 else FieldGrid(0.0, 0.0, 1.0, (0, 0))
-             for mask in masks]
+    grids = field_grids(depths, config)
     if previous is not None:
         initial = InitialState(np.stack([p[:3, :3] for p in previous.cam_to_world]), np.stack([p[:3, 3] for p in previous.cam_to_world]),
                                np.log(previous.scales), np.log(previous.relief_scale), np.log(previous.focals),
@@ -204,24 +202,41 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
         shared = np.full(n_views, np.exp(np.mean(np.log(guesses)))) if config.shared_focal else guesses
         initial = InitialState(rotations, translations, log_scales, np.zeros(n_views), np.log(shared),
                                [np.zeros(g.size) for g in grids])
+    problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root)
+    with single_threaded():  # a few thousand residuals: threads only add hand-offs
+        history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
+                           config.polish_rounds) if len(data.weight) else []
+    return alignment_result(problem, depths, grids, data, root, tree, aligned, history)
+
+
+def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: Sequence[PairCorrespondences],
+                      config: GlobalAlignConfig, grids: Sequence[FieldGrid], initial: InitialState, aligned: Sequence[bool],
+                      root: int) -> tuple[AlignmentProblem, Correspondences]:
+    """The problem of one capture: the aligned views' correspondences, the root view fixed."""
     data = _correspondences(depths, pairs, aligned)
-    free = [aligned[v] and v != root for v in range(n_views)]
+    free = [aligned[v] and v != root for v in range(len(depths))]
     problem = AlignmentProblem(depths, grids, data, initial, free, shared_focal=config.shared_focal,
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
                                focal_prior=config.focal_prior)
-    with single_threaded():  # a few thousand residuals: threads only add hand-offs
-        history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
-                           config.polish_rounds) if len(data.weight) else []
-    return _result(problem, depths, grids, data, root, tree, aligned, history)
+    return problem, data
 
 
-def _result(problem: AlignmentProblem, depths, grids, data: Correspondences, root, tree, aligned, history) -> GlobalAlignment:
+def field_grids(depths: Sequence[np.ndarray], config: GlobalAlignConfig) -> list[FieldGrid]:
+    """Each view's depth-field knot grid over its pointmap's support."""
+    return [FieldGrid.covering(np.isfinite(d), config.field_knots) if config.field_knots > 0 else FieldGrid(0.0, 0.0, 1.0, (0, 0))
+            for d in depths]
+
+
+def alignment_result(problem: AlignmentProblem, depths, grids, data: Correspondences, root, tree, aligned, history,
+                     cameras: tuple | None = None) -> GlobalAlignment:
+    """The :class:`GlobalAlignment` a solved problem describes (``cameras``: poses held elsewhere, as by a rig)."""
     with torch.no_grad():
-        rotations, translations = problem.rotations().numpy(), problem.translations().numpy()
+        cameras = problem.cameras() if cameras is None else cameras
+        rotations, translations = cameras[0].numpy(), cameras[1].numpy()
         if len(data.weight):
-            x_a, x_b, e_ab, e_ba = problem.correspondence_terms()
+            x_a, x_b, e_ab, e_ba = problem.correspondence_terms(cameras)
             weights = np.concatenate([data.weight, data.weight])
             residual_px = weighted_median(np.sqrt(torch.cat([e_ab, e_ba]).numpy()), weights)
             residual_3d = weighted_median((x_a - x_b).norm(dim=1).numpy(), data.weight)
@@ -240,7 +255,7 @@ def _result(problem: AlignmentProblem, depths, grids, data: Correspondences, roo
                                                       + float(problem.reliefs[view]) * field)).astype(np.float32)
             out_depths.append(dense)
             fields.append(coefficients.copy())
-        return GlobalAlignment(poses, [float(f) for f in problem.focals()], out_depths,
+        return GlobalAlignment(poses, [float(f) for f in cameras[2]], out_depths,
                                [float(a) for a in torch.exp(problem.log_alpha)], [float(s) for s in problem.scales()],
                                float(residual_px), float(residual_3d), list(tree), list(aligned), root, fields, history)
 

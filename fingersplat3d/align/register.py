@@ -37,6 +37,7 @@ from .epipolar import fundamental_inliers
 from .global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .guided import GuidedMatches, match_guided
 from .model_predictor import ModelPredictor
+from .rig import Rig, rig_align
 from .texture import as_gray, estimate_ridge_period, ridge_texture
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
@@ -78,6 +79,8 @@ class Registration:
     votes for ``surface``), and per round the verified matches."""
     period_px: float
     rounds: int
+    correspondences: list[PairCorrespondences] = field(default_factory=list)
+    """The verified correspondences the final alignment was fitted to (what a rig calibration pools)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,11 +136,13 @@ def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.nda
 
 
 def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config: RegistrationConfig = RegistrationConfig(),
-                   pairs: Sequence[tuple[int, int]] | None = None, progress=None) -> Registration:
+                   pairs: Sequence[tuple[int, int]] | None = None, progress=None, rig: "Rig | None" = None) -> Registration:
     """Align ``views`` (with masks) given their own-frame ``pointmaps`` (see the module docstring).
 
     ``pairs``: the view pairs to try (default: all ``a < b``). ``progress``: an optional callable
-    taking a short text, told what the loop is doing.
+    taking a short text, told what the loop is doing. ``rig``: a calibrated rig
+    (:mod:`~fingersplat3d.align.rig`) whose camera poses and focal are kept fixed; the views are
+    its cameras in order.
     """
     from .pairwise import register_pair
     from .features import Matches
@@ -177,7 +182,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     depths = [pointmap.depth for pointmap in pointmaps]
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
-    alignment = global_align(depths, focals, registered, config.global_align)
+    sizes = [(view.width, view.height) for view in views]
+    align = global_align if rig is None else (lambda d, f, c, cfg, previous=None: rig_align(d, f, c, cfg, rig, sizes, previous))
+    alignment = align(depths, focals, registered, config.global_align)
+    fitted = registered
     rounds = 0
     for _ in range(config.guided_rounds if registered else 0):
         rounds += 1
@@ -201,5 +209,6 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         if not refined:
             break
         say(f"global alignment, round {rounds}")
-        alignment = global_align(depths, focals, refined, config.global_align, previous=alignment)
-    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds)
+        alignment = align(depths, focals, refined, config.global_align, previous=alignment)
+        fitted = refined
+    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted)

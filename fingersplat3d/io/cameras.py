@@ -153,11 +153,12 @@ def _entries(cameras: Mapping[str, Camera] | Iterable[tuple[str, str, Camera]]) 
 
 
 def write_cameras(path: str | Path, cameras: Mapping[str, Camera] | Iterable[tuple[str, str, Camera]],
-                  units: str = "mm", scale_mm_per_unit: float | None = None) -> Path:
+                  units: str = "mm", scale_mm_per_unit: float | None = None, extra: Mapping[str, Any] | None = None) -> Path:
     """Write ``cameras.json`` atomically.
 
     ``cameras`` is a mapping ``name -> Camera`` (images are then ``images/<name>.png``), a list of
     ``(name, image_relpath, Camera)`` or a :class:`CameraSet` (its entries; ``units`` still applies).
+    ``extra``: more top-level keys after ``views`` (readers of the schema ignore them).
     """
     path = Path(path)
     entries = _entries(cameras)
@@ -175,7 +176,9 @@ def write_cameras(path: str | Path, cameras: Mapping[str, Camera] | Iterable[tup
                 "K": camera.K.tolist(), "world_to_cam": camera.world_to_cam.tolist()}
         lines.append("    " + json.dumps(view, allow_nan=False))
     text = ('{\n  "units": ' + json.dumps(units) + ',\n  "scale_mm_per_unit": ' + json.dumps(scale)
-            + ',\n  "views": [\n' + ",\n".join(lines) + "\n  ]\n}\n")
+            + ',\n  "views": [\n' + ",\n".join(lines) + "\n  ]"
+            + "".join(f",\n  {json.dumps(str(key))}: {json.dumps(value, indent=2, allow_nan=False)}" for key, value in (extra or {}).items())
+            + "\n}\n")
     with atomic_path(path) as temporary:
         temporary.write_text(text, encoding="utf-8")
     return path

@@ -1,0 +1,95 @@
+"""fs3d batch on a real local Ray instance (2 CPUs): every capture done or recorded, resumable, results and report."""
+from __future__ import annotations
+
+import csv
+import json
+from html.parser import HTMLParser
+
+import pytest
+
+from fingersplat3d.cli import main
+from fingersplat3d.io.capture import write_capture
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="module")
+def ray_local():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+class _Images(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.sources, self.rows = [], 0
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "img":
+            self.sources.append(dict(attrs)["src"])
+        elif tag == "tr":
+            self.rows += 1
+
+
+def test_batch_runs_records_failures_and_resumes(tmp_path, uwa640, ray_local, capsys):
+    dataset = tmp_path / "dataset"
+    write_capture(uwa640, dataset / "good")
+    broken = dataset / "broken"
+    write_capture(uwa640, broken)
+    (broken / "images" / "left.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    stale = out / ".good.tmp-killed"  # what a run killed mid-write leaves
+    stale.mkdir(parents=True)
+    (stale / "fused.ply").write_text("half")
+
+    status = main(["batch", str(dataset), "-o", str(out), "--no-splat", "--workers", "2"])
+    assert status == 4  # one capture failed: the run finished, said so, and the good one is complete
+    assert "1 of 2 captures failed" in capsys.readouterr().err
+    assert not stale.exists() and not [p for p in out.iterdir() if ".tmp-" in p.name]
+    good = out / "good"
+    for name in ("fused.ply", "cameras.json", "report.json", "batch.json", "depth", "thumbs"):
+        assert (good / name).exists(), name
+    assert not (out / "broken").exists() and (out / ".failed" / "broken.json").is_file()
+    rows = {row["capture"]: row for row in csv.DictReader(open(out / "results.csv"))}
+    assert rows["good"]["status"] == "done" and float(rows["good"]["seconds"]) > 0 and float(rows["good"]["peak_rss_mb"]) > 0
+    assert rows["broken"]["status"] == "failed" and "left.png" in rows["broken"]["reason"]
+    assert json.loads(rows["good"]["rig_angles_deg"])["0-1"] > 10
+    page = _Images()
+    page.feed((out / "report.html").read_text())
+    assert page.rows == 3 and page.sources and all((out / src).is_file() for src in page.sources)
+    from fingersplat3d.batch.results import browser_check, find_browser
+
+    browser = find_browser()
+    if browser:  # a real headless browser loads the page and every picture (tools/check_report.py)
+        loaded, failed_to_load = browser_check(out / "report.html", browser)
+        assert loaded == len(page.sources) and failed_to_load == 0
+
+    # a re-run skips the complete capture (not redone) and leaves the recorded failure alone
+    before = (good / "batch.json").stat().st_mtime_ns
+    assert main(["batch", str(dataset), "-o", str(out), "--no-splat", "--workers", "2"]) == 4
+    assert "0 run now, 1 complete before, 1 failed before" in capsys.readouterr().out
+    assert (good / "batch.json").stat().st_mtime_ns == before
+    # fixed, and retried on request
+    write_capture(uwa640, broken, overwrite=True)
+    assert main(["batch", str(dataset), "-o", str(out), "--no-splat", "--retry-failed", "--select", "name=broken"]) == 0
+    assert (out / "broken" / "batch.json").is_file() and not (out / ".failed" / "broken.json").exists()
+    rows = {row["capture"]: row["status"] for row in csv.DictReader(open(out / "results.csv"))}
+    assert rows == {"good": "done", "broken": "done"}  # the table covers every capture on disk, not just this run's
+
+
+def test_rig_calibrate_command(tmp_path, uwa640, ray_local, capsys):
+    from fingersplat3d.io.rig import read_rig
+    from fingersplat3d.synth import SynthConfig, synthesize
+
+    dataset = tmp_path / "dataset"
+    write_capture(uwa640, dataset / "a")
+    write_capture(synthesize(3, SynthConfig(size=(640, 512))).capture, dataset / "b")
+    rig_path = tmp_path / "rig.json"
+    assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 0
+    assert "2 captures used" in capsys.readouterr().out
+    rig = read_rig(rig_path)
+    assert rig.names == tuple(uwa640.names) and rig.focal > 0 and sorted(rig.info["captures"]) == ["a", "b"]
+    assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 2  # exists: nothing overwritten
+    assert main(["rig", "calibrate", str(dataset), "-o", str(tmp_path / "one.json"), "--select", "count=1"]) == 3
+    assert "a rig needs at least 2" in capsys.readouterr().err and not (tmp_path / "one.json").exists()

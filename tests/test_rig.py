@@ -1,0 +1,116 @@
+"""Rig calibration: the joint fit over captures recovers a known rig; captures aligned on a fixed rig; rig.json."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fingersplat3d.align.register import register_views
+from fingersplat3d.align.rig import Rig, calibrate_rig, quarter_turn, robust_rotation_mean
+from fingersplat3d.cli import main
+from fingersplat3d.errors import InputError
+from fingersplat3d.eval.poses import rotation_angle_deg
+from fingersplat3d.io.rig import read_rig, write_rig
+from fingersplat3d.pipeline import FuseConfig, register_capture
+from fingersplat3d.scene import Capture
+from fingersplat3d.synth import SynthConfig, synthesize
+
+SEEDS = (1, 3, 5)
+
+
+def blind(capture: Capture) -> Capture:
+    return Capture(tuple(view.with_(camera=None, depth=None) for view in capture.views), capture.metadata)
+
+
+def true_relative(capture: Capture, view: int) -> np.ndarray:
+    """Camera ``view`` -> camera 0 rotation of the synthetic rig (the same for every seed)."""
+    poses = [np.linalg.inv(v.camera.world_to_cam)[:3, :3] for v in capture.views]
+    return poses[0].T @ poses[view]
+
+
+@pytest.fixture(scope="module")
+def registered(uwa640):
+    captures = [uwa640] + [synthesize(seed, SynthConfig(size=(640, 512))).capture for seed in SEEDS[1:]]
+    return captures, [register_capture(blind(c), FuseConfig(splat=None)) for c in captures]
+
+
+def test_robust_mean_ignores_one_outlier_and_quarter_turns_compose():
+    from scipy.spatial.transform import Rotation
+
+    good = [Rotation.from_rotvec([0.0, 0.0, np.radians(a)]).as_matrix() for a in (44.5, 45.0, 45.5, 45.2)]
+    outlier = Rotation.from_rotvec([0.0, 0.0, np.radians(80.0)]).as_matrix()
+    mean = robust_rotation_mean(good + [outlier])
+    assert rotation_angle_deg(mean, good[1]) < 0.5
+    assert np.allclose(quarter_turn(1) @ quarter_turn(3), np.eye(3)) and np.allclose(quarter_turn(2), np.diag([-1, -1, 1]))
+
+
+def test_calibration_recovers_the_rig_better_than_single_captures(registered):
+    captures, pooled = registered
+    assert all(all(c.alignment.aligned) for c in pooled)
+    calibration = calibrate_rig(pooled, captures[0].names)
+    rig = calibration.rig
+    assert np.allclose(rig.rotations[0], np.eye(3)) and np.allclose(rig.centers[0], 0)
+    errors = [rotation_angle_deg(rig.rotations[v], true_relative(captures[0], v)) for v in (1, 2)]
+    single = [rotation_angle_deg(c.alignment.cam_to_world[0][:3, :3].T @ c.alignment.cam_to_world[v][:3, :3],
+                                 true_relative(captures[0], v)) for c in pooled for v in (1, 2)]
+    assert max(errors) < 3.0, errors  # measured 0.4-1.3 degrees (README); single captures up to 7.8
+    assert max(errors) <= max(single) + 0.5
+    assert 0.8 < rig.focal / captures[0].views[0].camera.K[0, 0] < 1.25
+    assert set(calibration.used) | set(calibration.left_out) == {c.name for c in pooled}
+
+
+def test_a_capture_aligned_on_a_fixed_rig_keeps_its_poses(registered, tmp_path):
+    captures, pooled = registered
+    rig = calibrate_rig(pooled[:2], captures[0].names).rig
+    path = write_rig(tmp_path / "rig.json", rig)
+    back = read_rig(path)
+    assert back.names == rig.names and back.sizes == rig.sizes and back.focal == pytest.approx(rig.focal)
+    assert np.allclose(back.rotations, rig.rotations, atol=1e-9) and np.allclose(back.centers, rig.centers, atol=1e-9)
+    assert json.loads(path.read_text())["rig"]["captures"] == rig.info["captures"]
+    from fingersplat3d.pipeline import fuse
+
+    result = fuse(blind(captures[2]), FuseConfig(splat=None), rig=back)
+    assert result.registered and result.report["alignment"]["residual_px"] < 3
+    poses = [camera.rotation.T for camera in result.cameras]  # cam -> world
+    for v in (1, 2):
+        assert rotation_angle_deg(poses[0].T @ poses[v], rig.rotations[v]) < 1e-6
+    assert all(camera.K[0, 0] == pytest.approx(rig.focal) for camera in result.cameras)
+
+
+def test_rig_files_and_captures_that_do_not_fit_are_one_sentence(tmp_path, uwa640):
+    rig = Rig(("a", "b"), ((640, 512), (640, 512)), np.stack([np.eye(3)] * 2), np.array([[0, 0, 0], [1.0, 0, 0]]), 900.0)
+    path = write_rig(tmp_path / "rig.json", rig)
+    with pytest.raises(InputError, match="2 cameras"):
+        from fingersplat3d.pipeline import fuse
+
+        fuse(blind(uwa640), FuseConfig(splat=None), rig=read_rig(path))
+    data = json.loads(path.read_text())
+    data["views"][1]["K"][0][0] = 950.0
+    data["views"][1]["K"][1][1] = 950.0
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    with pytest.raises(InputError, match="one focal length"):
+        read_rig(tmp_path / "bad.json")
+    assert rig.turns_for(0, (512, 640)) == (1, 3) and rig.turns_for(0, (640, 512)) == (0,)
+    with pytest.raises(ValueError):
+        rig.turns_for(0, (100, 100))
+    # the CLI: a rig with the wrong number of cameras is exit 2, one sentence
+    capture_dir = tmp_path / "capture"
+    from fingersplat3d.io.capture import write_capture
+
+    write_capture(uwa640, capture_dir)
+    assert main(["fuse", str(capture_dir), "-o", str(tmp_path / "out"), "--no-splat", "--rig", str(path)]) == 2
+
+
+def test_register_views_with_a_rig_tries_both_quarter_turns_of_a_portrait_view(registered):
+    captures, pooled = registered
+    rig = calibrate_rig(pooled, captures[0].names).rig
+    capture = blind(captures[1])
+    turned = capture.views[0].with_(image=np.ascontiguousarray(np.rot90(capture.views[0].image)),
+                                    mask=np.ascontiguousarray(np.rot90(capture.views[0].mask)))
+    views = (turned,) + capture.views[1:]
+    from fingersplat3d.pointmaps import get_backend
+
+    pointmaps = get_backend("prior").predict_views(views)
+    alignment = register_views(views, pointmaps, rig=rig).alignment
+    assert all(alignment.aligned) and alignment.residual_px < 3
