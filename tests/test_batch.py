@@ -93,3 +93,21 @@ def test_rig_calibrate_command(tmp_path, uwa640, ray_local, capsys):
     assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 2  # exists: nothing overwritten
     assert main(["rig", "calibrate", str(dataset), "-o", str(tmp_path / "one.json"), "--select", "count=1"]) == 3
     assert "a rig needs at least 2" in capsys.readouterr().err and not (tmp_path / "one.json").exists()
+
+
+def test_a_dying_worker_is_a_recorded_failure_not_a_crash(ray_local):
+    from fingersplat3d.batch.engine import ray_map
+
+    def _die_on_two(item):  # nested: shipped to the workers by value
+        import os
+
+        if item == 2:
+            os._exit(1)  # the worker process dies mid-task
+        return item * 10
+
+    seen = {}
+    figures = ray_map(_die_on_two, [1, 2, 3], (), lambda item, result, error: seen.update({item: (result, error)}),
+                      progress=False)
+    assert seen[1] == (10, None) and seen[3] == (30, None)
+    assert seen[2][0] is None and seen[2][1]  # one sentence saying why
+    assert figures["tasks"] == 3 and figures["cpus"] == 2
