@@ -346,6 +346,9 @@ def _add_rig(commands) -> None:
                     "rig.json (the cameras.json schema without the finger) for 'fs3d fuse --rig' and 'fs3d batch --rig'.")
     _add_dataset_arguments(calibrate)
     calibrate.add_argument("-o", "--output", type=Path, required=True, help="rig.json to write")
+    calibrate.add_argument("--rounds", type=_number(int, 0, 20), default=0,
+                           help="then re-match every capture through the calibrated rig and fit again, this many times "
+                                "(default 0; each round costs one more registration per capture, see the README)")
     calibrate.add_argument("--overwrite", action="store_true", help="replace an existing file")
     calibrate.set_defaults(run=_run_rig_calibrate)
 
@@ -392,8 +395,11 @@ def _run_rig_calibrate(args: argparse.Namespace) -> int:
         else:
             captures.append(capture)
 
-    run = ray_map(_register_job, jobs, (config, args.threads_per_task), on_result, address=args.address,
-                  cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc="fs3d rig calibrate")
+    def register(selected, rig=None, desc="fs3d rig calibrate"):
+        return ray_map(_register_job, selected, (config, args.threads_per_task, rig), on_result, address=args.address,
+                       cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
+
+    run = register(jobs)
     names = sorted({c.view_names for c in captures})
     if len(captures) < 2:
         print(f"fs3d rig calibrate: only {len(captures)} of {len(jobs)} captures registered with all their views; "
@@ -402,10 +408,18 @@ def _run_rig_calibrate(args: argparse.Namespace) -> int:
     if len(names) != 1:
         raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
     start = time.perf_counter()
-    calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0],
-                                replace(GlobalAlignConfig(), polish_iterations=400, polish_rounds=3))
+    fit = replace(GlobalAlignConfig(), polish_iterations=400, polish_rounds=3)
+    calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
+    for round_ in range(args.rounds):  # re-match through the rig, fit again (its matches snap to the right ridges)
+        used = [job for job in jobs if job.name in calibration.used]
+        captures.clear()
+        register(used, calibration.rig, desc=f"fs3d rig calibrate: round {round_ + 1}")
+        if len(captures) < 2:
+            break
+        calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
     rig = calibration.rig
-    rig.info.update(failed=failures, register_seconds=round(run["wall_s"], 1), fit_seconds=round(time.perf_counter() - start, 1))
+    rig.info.update(failed=failures, rounds=args.rounds, register_seconds=round(run["wall_s"], 1),
+                    fit_seconds=round(time.perf_counter() - start, 1))
     write_rig(args.output, rig)
     from .eval.poses import rotation_angle_deg
 
@@ -416,7 +430,7 @@ def _run_rig_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _register_job(job, config, threads: int):
+def _register_job(job, config, threads: int, rig=None):
     """A Ray task of 'fs3d rig calibrate': one capture registered (what the calibration pools)."""
     import torch
 
@@ -424,7 +438,7 @@ def _register_job(job, config, threads: int):
     from .pipeline import register_capture
 
     torch.set_num_threads(max(1, threads))
-    return register_capture(load_job(job), config)
+    return register_capture(load_job(job), config, rig)
 
 
 def _splat_config(args: argparse.Namespace):

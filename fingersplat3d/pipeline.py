@@ -202,14 +202,17 @@ def _check_rig(capture: Capture, rig: Rig) -> None:
                              f"{rig.sizes[v][0]}x{rig.sizes[v][1]} images")
 
 
-def register_capture(capture: Capture, config: FuseConfig | None = None) -> RigCapture:
+def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Rig | None = None) -> RigCapture:
     """A capture up to its registration (masks, pointmaps, correspondences, its own alignment): what a
-    rig calibration (:func:`~fingersplat3d.align.rig.calibrate_rig`) pools."""
+    rig calibration (:func:`~fingersplat3d.align.rig.calibrate_rig`) pools. With ``rig``, the
+    guided matching runs through that rig's model (a calibration's re-matching round)."""
     config = FuseConfig() if config is None else config
     capture = _with_masks(capture)
     pairs = _distinct_pairs(capture)
     pointmaps, _ = _pointmaps(capture, pairs, config, {})
-    registration = register_views(capture.views, pointmaps, config.registration, pairs)
+    if rig is not None:
+        _check_rig(capture, rig)
+    registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig)
     name = str(capture.metadata.get("name") or "_".join(capture.names))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
                       registration.alignment, [(view.width, view.height) for view in capture.views], tuple(capture.names))

@@ -86,10 +86,11 @@ def test_rig_calibrate_command(tmp_path, uwa640, ray_local, capsys):
     write_capture(uwa640, dataset / "a")
     write_capture(synthesize(3, SynthConfig(size=(640, 512))).capture, dataset / "b")
     rig_path = tmp_path / "rig.json"
-    assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 0
+    assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path), "--rounds", "1"]) == 0
     assert "2 captures used" in capsys.readouterr().out
     rig = read_rig(rig_path)
     assert rig.names == tuple(uwa640.names) and rig.focal > 0 and sorted(rig.info["captures"]) == ["a", "b"]
+    assert rig.info["rounds"] == 1
     assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 2  # exists: nothing overwritten
     assert main(["rig", "calibrate", str(dataset), "-o", str(tmp_path / "one.json"), "--select", "count=1"]) == 3
     assert "a rig needs at least 2" in capsys.readouterr().err and not (tmp_path / "one.json").exists()
