@@ -7,7 +7,8 @@ Unknowns (float64), in *normalised units* where the root view's median pointmap 
 * one shared focal length (or one per view), principal point at each image's centre;
 * per view a depth surface on top of the backend's own pointmap depth ``z_v``:
   ``depth_v(p) = s_v (m_v + alpha_v (z_v(p) - m_v) + r_v F_v(p))`` where ``m_v`` is the median
-  pointmap depth, ``alpha_v`` scales the relief (a wrong cross-section is too flat or too deep),
+  pointmap depth, ``alpha_v`` scales the relief (a wrong cross-section is too flat or too deep;
+  one ``alpha`` for all views when the relief is shared: one finger, one cross-section),
   ``r_v`` is the pointmap's relief (so the field is O(1)) and ``F_v`` a cubic B-spline field
   (:mod:`fingersplat3d.align.depth_field`); ``s_root = 1`` fixes the overall scale.
 
@@ -66,7 +67,7 @@ class AlignmentProblem(torch.nn.Module):
     def __init__(self, depths: Sequence[np.ndarray], grids: Sequence[FieldGrid], data: Correspondences,
                  initial: InitialState, free: Sequence[bool], *, shared_focal: bool, optimize_focal: bool,
                  focal_guess: np.ndarray, robust_px: float, alpha_prior: float, field_smoothness: float,
-                 field_prior: float, focal_prior: float) -> None:
+                 field_prior: float, focal_prior: float, shared_relief: bool = False) -> None:
         super().__init__()
         dtype = torch.float64
         n_views = len(depths)
@@ -114,7 +115,8 @@ class AlignmentProblem(torch.nn.Module):
         self.omega = torch.nn.Parameter(torch.zeros((n_views, 3), dtype=dtype))
         self.translation = torch.nn.Parameter(torch.as_tensor(initial.translations, dtype=dtype).clone())
         self.log_scale = torch.nn.Parameter(torch.as_tensor(initial.log_scales, dtype=dtype).clone())
-        self.log_alpha = torch.nn.Parameter(torch.as_tensor(initial.log_alphas, dtype=dtype).clone())
+        alphas = np.asarray(initial.log_alphas, np.float64)
+        self.log_alpha = torch.nn.Parameter(torch.as_tensor([alphas.mean()] if shared_relief else alphas, dtype=dtype).clone())
         focal = np.asarray(initial.log_focals, np.float64)
         self.log_focal = torch.nn.Parameter(torch.as_tensor([focal.mean()] if shared_focal else focal, dtype=dtype).clone(),
                                             requires_grad=optimize_focal)
@@ -132,6 +134,10 @@ class AlignmentProblem(torch.nn.Module):
     def scales(self) -> torch.Tensor:
         return torch.exp(self.log_scale * self.free + self.base_log_scale * (1 - self.free))
 
+    def log_alphas(self) -> torch.Tensor:
+        """``[N]`` log relief scales (one shared value, expanded, when the relief is shared)."""
+        return self.log_alpha.expand(self.medians.shape[0]) if self.log_alpha.shape[0] == 1 else self.log_alpha
+
     def focals(self) -> torch.Tensor:
         count = self.medians.shape[0]
         return torch.exp(self.log_focal.expand(count) if self.shared_focal else self.log_focal)
@@ -142,7 +148,7 @@ class AlignmentProblem(torch.nn.Module):
         scales = self.scales() if scales is None else scales
         field = (self.field[index] * weight).sum(-1) if self.field.numel() else torch.zeros_like(z)
         median = self.medians[view]
-        return scales[view] * (median + torch.exp(self.log_alpha[view]) * (z - median) + self.reliefs[view] * field)
+        return scales[view] * (median + torch.exp(self.log_alphas()[view]) * (z - median) + self.reliefs[view] * field)
 
     def _world_points(self, cameras: tuple, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         rotations, translations, focals = cameras
@@ -185,7 +191,7 @@ class AlignmentProblem(torch.nn.Module):
         if self.bend_index.numel():
             bend = self.field[self.bend_index[:, 0]] - 2 * self.field[self.bend_index[:, 1]] + self.field[self.bend_index[:, 2]]
             loss = loss + self.field_smoothness * (bend ** 2).sum()
-        loss = loss + self.field_prior * (self.field ** 2).sum() + self.alpha_prior * (self.log_alpha ** 2).sum()
+        loss = loss + self.field_prior * (self.field ** 2).sum() + self.alpha_prior * (self.log_alphas() ** 2).sum()  # per view, shared or not
         guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
         return loss + self.focal_prior * ((self.log_focal - guess) ** 2).sum()
 

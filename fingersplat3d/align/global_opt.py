@@ -80,6 +80,10 @@ class GlobalAlignConfig:
     """Pull of log relief scale toward 0."""
     focal_prior: float = 1e-4
     """Pull of log focal toward the guess."""
+    shared_relief: bool = True
+    """One relief scale for all views (they see one finger) instead of one per view. Measured (README):
+    rotation error on synthetic ``uwa`` mean 2.44 -> 2.17 deg, ``cfpose`` 4.12 -> 3.42 deg; real
+    rig consistency 2.91 / 3.74 / 4.90 -> 2.85 / 1.58 / 3.55 deg."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,7 +223,7 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
-                               focal_prior=config.focal_prior)
+                               focal_prior=config.focal_prior, shared_relief=config.shared_relief)
     return problem, data
 
 
@@ -251,12 +255,12 @@ def alignment_result(problem: AlignmentProblem, depths, grids, data: Corresponde
             coefficients = problem.field[start:stop].numpy()
             field = grids[view].dense(coefficients, depth.shape) if grids[view].size else 0.0
             median = float(problem.medians[view])
-            dense = (float(problem.scales()[view]) * (median + float(torch.exp(problem.log_alpha[view])) * (depth - median)
+            dense = (float(problem.scales()[view]) * (median + float(torch.exp(problem.log_alphas()[view])) * (depth - median)
                                                       + float(problem.reliefs[view]) * field)).astype(np.float32)
             out_depths.append(dense)
             fields.append(coefficients.copy())
         return GlobalAlignment(poses, [float(f) for f in cameras[2]], out_depths,
-                               [float(a) for a in torch.exp(problem.log_alpha)], [float(s) for s in problem.scales()],
+                               [float(a) for a in torch.exp(problem.log_alphas())], [float(s) for s in problem.scales()],
                                float(residual_px), float(residual_3d), list(tree), list(aligned), root, fields, history)
 
 
