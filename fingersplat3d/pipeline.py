@@ -213,7 +213,8 @@ def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Ri
     if rig is not None:
         _check_rig(capture, rig)
     registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig)
-    name = str(capture.metadata.get("name") or "_".join(capture.names))
+    seed = capture.metadata.get("seed")
+    name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
                       registration.alignment, [(view.width, view.height) for view in capture.views], tuple(capture.names))
 

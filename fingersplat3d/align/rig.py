@@ -254,6 +254,8 @@ def calibrate_rig(captures: Sequence[RigCapture], names: Sequence[str],
     rig's cameras in order.
     """
     captures = [c for c in captures if all(c.alignment.aligned)]
+    if len({c.name for c in captures}) < len(captures):  # names key the report: make them unique
+        captures = [replace(c, name=f"{c.name}#{k}") for k, c in enumerate(captures)]
     if len(captures) < 2:
         raise ValueError(f"a rig calibration needs at least 2 captures with every view registered, got {len(captures)}")
     left_out: dict[str, str] = {}
