@@ -508,9 +508,9 @@ def _run_render(args: argparse.Namespace) -> int:
     from .io.cameras import read_cameras
     from .io.gaussians_ply import read_gaussians_ply
     from .io.renders import write_renders
-    from .splat.camera_path import arc_cameras, cameras_at_angles
+    from .splat.camera_path import cameras_at_angles
     from .device import resolve_device
-    from .splat.novel import render_views
+    from .splat.novel import arc_views, render_views
 
     folder = args.reconstruction
     for needed in ("gaussians.ply", "cameras.json"):
@@ -525,14 +525,12 @@ def _run_render(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     try:
         if args.angles:
-            novel = cameras_at_angles(inputs, args.angles)
             names = [f"angle_{a:+07.2f}".replace(".", "p") for a in args.angles]
+            views = render_views(gaussians, list(zip(names, cameras_at_angles(inputs, args.angles))))
         else:
-            novel = arc_cameras(inputs, args.count)
-            names = [f"arc_{k:02d}" for k in range(len(novel))]
+            views = arc_views(gaussians, inputs, args.count)
     except ValueError as error:  # one camera, or cameras that did not align: no rig axis to turn about
         raise InputError(f"{folder / 'cameras.json'}: cannot place novel views: {error}") from None
-    views = render_views(gaussians, list(zip(names, novel)))
     write_renders(output, views, cameras.units, cameras.scale_mm_per_unit, overwrite=args.overwrite)
     print(f"wrote {output}: {len(views)} views of {len(gaussians)} Gaussians in {time.perf_counter() - start:.1f} s")
     return 0

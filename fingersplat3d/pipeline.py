@@ -196,10 +196,10 @@ def _check_rig(capture: Capture, rig: Rig) -> None:
         raise InputError(f"the rig has {len(rig.names)} cameras ({', '.join(rig.names)}) but the capture has "
                          f"{len(capture)} views ({', '.join(capture.names)})")
     for v, view in enumerate(capture.views):
-        size = (view.width, view.height)
-        if size not in (tuple(rig.sizes[v]), tuple(rig.sizes[v])[::-1]):
-            raise InputError(f"view {view.name!r} is {size[0]}x{size[1]} but camera {rig.names[v]!r} of the rig takes "
-                             f"{rig.sizes[v][0]}x{rig.sizes[v][1]} images")
+        try:
+            rig.turns_for(v, (view.width, view.height))
+        except ValueError as error:
+            raise InputError(f"view {view.name!r}: {error}") from None
 
 
 def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Rig | None = None) -> RigCapture:
@@ -207,11 +207,11 @@ def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Ri
     rig calibration (:func:`~fingersplat3d.align.rig.calibrate_rig`) pools. With ``rig``, the
     guided matching runs through that rig's model (a calibration's re-matching round)."""
     config = FuseConfig() if config is None else config
+    if rig is not None:
+        _check_rig(capture, rig)
     capture = _with_masks(capture)
     pairs = _distinct_pairs(capture)
     pointmaps, _ = _pointmaps(capture, pairs, config, {})
-    if rig is not None:
-        _check_rig(capture, rig)
     registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig)
     seed = capture.metadata.get("seed")
     name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))

@@ -134,26 +134,11 @@ def _one(capture_stem: str, data: str, rounds: int) -> dict:
             "leave_one_out": _leave_one_out(capture, three, two)}
 
 
-def _roll(sign: int) -> np.ndarray:
-    """Rotation of a camera frame by ``sign * 90`` degrees about its optical axis."""
-    c, s = 0.0, float(sign)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _robust_mean(rotations):
-    from scipy.spatial.transform import Rotation
-
-    stack = Rotation.from_matrix(np.stack(rotations))
-    mean = stack.mean()
-    for _ in range(10):
-        deviation = (stack * mean.inv()).magnitude()
-        mean = stack.mean(weights=1.0 / np.maximum(deviation, np.radians(0.25)))
-    return mean
-
-
 def rig_consistency(records: list[dict]) -> dict:
     """Per camera pair: each capture's deviation from the robust mean relative rotation (degrees)."""
     from scipy.spatial.transform import Rotation
+
+    from fingersplat3d.align.rig import quarter_turn, robust_rotation_mean
 
     usable = [r for r in records if r["registered"] == 3]
     if len(usable) < 2:
@@ -172,7 +157,7 @@ def rig_consistency(records: list[dict]) -> dict:
                 best = None
                 for sign in (1, -1):
                     trial = list(rotations[r["capture"]])
-                    trial[k] = _roll(sign) @ trial[k]
+                    trial[k] = quarter_turn(sign % 4) @ trial[k]
                     cost = sum(Rotation.from_matrix((trial[j] @ trial[i].T) @ (o[j] @ o[i].T).T).magnitude()
                                for o in others for i, j in PAIRS)
                     best = min(best, (cost, sign, trial), key=lambda t: t[0]) if best else (cost, sign, trial)
@@ -181,7 +166,7 @@ def rig_consistency(records: list[dict]) -> dict:
     result = {}
     for i, j in PAIRS:
         relative = {name: R[j] @ R[i].T for name, R in rotations.items()}
-        mean = _robust_mean(list(relative.values()))
+        mean = Rotation.from_matrix(robust_rotation_mean(list(relative.values())))
         deviation = {name: float(np.degrees((Rotation.from_matrix(rel) * mean.inv()).magnitude())) for name, rel in relative.items()}
         result[f"{i}{j}"] = {"mean_angle_deg": float(np.degrees(mean.magnitude())), "deviation_deg": deviation,
                              "median_deg": float(np.median(list(deviation.values())))}

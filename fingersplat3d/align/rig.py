@@ -35,7 +35,7 @@ from ..device import single_threaded
 from ..rotations import axis_angle_to_matrix
 from .alignment_problem import InitialState
 from .global_opt import (GlobalAlignConfig, GlobalAlignment, PairCorrespondences, alignment_problem, alignment_result,
-                         field_grids, spanning_tree)
+                         field_grids, reached, spanning_tree)
 from .optimize import minimize
 
 __all__ = ["Rig", "RigCapture", "RigCalibration", "calibrate_rig", "rig_align", "robust_rotation_mean", "quarter_turn"]
@@ -162,6 +162,10 @@ class RigProblem(torch.nn.Module):
                            focal=float(torch.exp(self.log_focal)), info=info)
 
 
+def _median_depths(depths: Sequence[np.ndarray]) -> np.ndarray:
+    return np.array([float(np.nanmedian(d)) if np.isfinite(d).any() else 1.0 for d in depths])
+
+
 def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config: GlobalAlignConfig,
                      previous: GlobalAlignment | None):
     """One capture's problem with root view 0, its surfaces started from ``previous`` (or the pointmaps)."""
@@ -169,14 +173,11 @@ def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config
     n_views = len(depths)
     root = 0
     _, tree = spanning_tree(n_views, capture.correspondences, root)
-    aligned = [False] * n_views
-    aligned[root] = True
-    for _, child in tree:
-        aligned[child] = True
+    aligned = reached(n_views, root, tree)
     grids = field_grids(depths, config)
-    medians = np.array([float(np.nanmedian(d)) if np.isfinite(d).any() else 1.0 for d in depths])
+    medians = _median_depths(depths)
     if previous is not None:  # the previous alignment's depth proportions, re-rooted at view 0
-        previous_medians = np.array([float(np.nanmedian(d)) if np.isfinite(d).any() else 1.0 for d in previous.depths])
+        previous_medians = _median_depths(previous.depths)
         relative = previous_medians / previous_medians[root]
         alphas = np.log(np.asarray(previous.relief_scale, np.float64))
         fields = [np.asarray(f, np.float64) for f in previous.fields]

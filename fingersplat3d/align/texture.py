@@ -25,9 +25,9 @@ DEFAULT_PERIOD_PX = 8.0
 """Period returned when no ridge peak stands out (a featureless image)."""
 _TILE = 96  # pixels per side of a spectrum tile (several ridge periods at any usual resolution)
 _FFT = 256  # padded size of the tile spectrum (frequency resolution)
-_MIN_PEAK_CONTRAST = 4.0
-RIDGE_AREA_WIDTHS = 1.4
-RMS_FLOOR = 1e-3  # intensity: below this local band RMS there is no texture to normalise (a quarter grey level)  # a tile's peak must stand this far above its band's mean power
+_MIN_PEAK_CONTRAST = 4.0  # a tile's peak must stand this far above its band's mean power
+RIDGE_AREA_WIDTHS = 1.4  # the ridge period is measured within this many finger widths of the tip
+RMS_FLOOR = 1e-3  # intensity: below this local band RMS there is no texture to normalise (a quarter grey level)
 
 
 def as_gray(image: np.ndarray, name: str = "image") -> np.ndarray:

@@ -13,14 +13,7 @@ from __future__ import annotations
 import os
 from typing import Any, Callable, Sequence
 
-__all__ = ["ray_map", "local_cpus"]
-
-
-def local_cpus() -> int:
-    """The cores this process may use (affinity, cgroup quota): what a local Ray instance is given."""
-    from ..device import cpu_threads
-
-    return cpu_threads()
+__all__ = ["ray_map"]
 
 
 def ray_map(function: Callable, items: Sequence[Any], args: tuple, on_result: Callable[[Any, Any, str | None], None], *,
@@ -36,13 +29,15 @@ def ray_map(function: Callable, items: Sequence[Any], args: tuple, on_result: Ca
     import ray
     from tqdm import tqdm
 
+    from ..device import cpu_threads
+
     started = time.perf_counter()
     if not ray.is_initialized():
         options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
         if address:
             ray.init(address=address, **options)
         else:
-            ray.init(num_cpus=num_cpus or local_cpus(), **options)
+            ray.init(num_cpus=num_cpus or cpu_threads(), **options)  # the cores this process may use
     cpus = int(ray.cluster_resources().get("CPU", 1))
     remote = ray.remote(num_cpus=cpus_per_task, num_gpus=gpus_per_task, max_retries=0)(function)
     window = max(1, 2 * cpus // max(1, cpus_per_task))

@@ -13,7 +13,7 @@ from typing import Sequence
 from ..io.jobs import CaptureJob
 from .engine import ray_map
 from .results import write_results
-from .task import FAILED, ROW_FILE, BatchOptions, failure_path, process_capture
+from .task import FAILED, ROW_FILE, BatchOptions, failure_path, process_capture, record_failure
 
 __all__ = ["BatchRun", "run_batch", "pending_jobs"]
 
@@ -59,13 +59,7 @@ def run_batch(jobs: Sequence[CaptureJob], out: str | Path, options: BatchOptions
 
     def on_result(job: CaptureJob, row: dict | None, error: str | None) -> None:
         if error is not None:  # the worker died or the task raised past its own guard: record it
-            import json
-
-            from ..atomic import atomic_path
-
-            path = failure_path(out, job.name)
-            with atomic_path(path) as temporary:
-                temporary.write_text(json.dumps({"capture": job.name, "status": "failed", "reason": error}, indent=2) + "\n")
+            record_failure(out, {"capture": job.name, "status": "failed", "reason": error})
         write_results(out, names)
 
     engine = {"cpus": 0, "tasks": 0, "wall_s": 0.0}

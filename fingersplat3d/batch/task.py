@@ -21,7 +21,7 @@ from ..atomic import atomic_dir, atomic_path
 from ..errors import InputError
 from ..io.jobs import CaptureJob
 
-__all__ = ["BatchOptions", "FAILED", "ROW_FILE", "process_capture", "failure_path"]
+__all__ = ["BatchOptions", "FAILED", "ROW_FILE", "process_capture", "failure_path", "record_failure"]
 
 FAILED = ".failed"
 ROW_FILE = "batch.json"
@@ -69,13 +69,19 @@ def _thumbnails(folder: Path, capture) -> None:
 
 def _render_arc(folder: Path, result, count: int) -> None:
     from ..io.renders import write_renders
-    from ..splat.camera_path import arc_cameras
-    from ..splat.novel import render_views
+    from ..splat.novel import arc_views
 
     cameras = [camera.scaled(THUMB_WIDTH * 2 / camera.width) for camera in result.cameras]
-    novel = arc_cameras(cameras, count)
-    views = render_views(result.gaussians, [(f"arc_{k:02d}", camera) for k, camera in enumerate(novel)])
-    write_renders(folder / "renders", views, result.units, result.scale_mm_per_unit)
+    write_renders(folder / "renders", arc_views(result.gaussians, cameras, count), result.units, result.scale_mm_per_unit)
+
+
+def record_failure(out: Path, row: dict) -> Path:
+    """Write a failed capture's row to ``out/.failed/<capture>.json`` (atomically); returns the path."""
+    path = failure_path(out, row["capture"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps(row, indent=2, default=str) + "\n")
+    return path
 
 
 def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
@@ -113,8 +119,5 @@ def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
                    seconds=round(time.perf_counter() - started, 3), peak_rss_mb=round(_peak_rss_mb(), 1))
         if not isinstance(error, InputError):
             row["trace"] = traceback.format_exc(limit=4)
-        path = failure_path(out, job.name)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as temporary:
-            temporary.write_text(json.dumps(row, indent=2, default=str) + "\n")
+        record_failure(out, row)
         return row

@@ -20,7 +20,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Sequence
 
 from ..errors import InputError, input_error
 from ..scene import Capture
@@ -142,8 +142,7 @@ def load_job(job: CaptureJob) -> Capture:
     """The job's capture (one), named after the job; a job with a problem is an ``InputError`` saying it."""
     if job.problem:
         raise InputError(job.problem)
-    files: Iterable[str] = job.files
-    captures = load_any(files[0] if len(job.files) == 1 else list(files))
+    captures = load_any(job.files[0] if len(job.files) == 1 else list(job.files))
     if len(captures) != 1:
         raise InputError(f"{job.name}: its files hold {len(captures)} captures, not one")
     capture = captures[0]

@@ -12,10 +12,11 @@ import numpy as np
 import torch
 
 from ..scene import Camera
+from .camera_path import arc_cameras
 from .fit import near_plane, render_camera
 from .gaussians import Gaussians
 
-__all__ = ["NovelView", "render_views"]
+__all__ = ["NovelView", "render_views", "arc_views"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,3 +40,9 @@ def render_views(gaussians: Gaussians, cameras: Sequence[tuple[str, Camera]], *,
             depth = np.where(alpha >= min_alpha, out.depth.cpu().numpy(), np.nan).astype(np.float32)
             views.append(NovelView(name, camera, image[..., 0] if image.shape[-1] == 1 else image, alpha, depth))
     return views
+
+
+def arc_views(gaussians: Gaussians, cameras: Sequence[Camera], count: int) -> list[NovelView]:
+    """``count`` views ``arc_00``, ``arc_01``, ... on the arc from the leftmost to the rightmost of ``cameras``
+    (:func:`~fingersplat3d.splat.camera_path.arc_cameras`; ``ValueError`` when they do not span one)."""
+    return render_views(gaussians, [(f"arc_{k:02d}", camera) for k, camera in enumerate(arc_cameras(cameras, count))])
