@@ -432,12 +432,11 @@ def _run_rig_calibrate(args: argparse.Namespace) -> int:
 
 def _register_job(job, config, threads: int, rig=None):
     """A Ray task of 'fs3d rig calibrate': one capture registered (what the calibration pools)."""
-    import torch
-
+    from .device import use_threads
     from .io.jobs import load_job
     from .pipeline import register_capture
 
-    torch.set_num_threads(max(1, threads))
+    use_threads(threads)
     return register_capture(load_job(job), config, rig)
 
 

@@ -17,7 +17,7 @@ import torch
 
 from .errors import InputError
 
-__all__ = ["resolve_device", "cpu_threads", "single_threaded"]
+__all__ = ["resolve_device", "cpu_threads", "use_threads", "single_threaded"]
 
 
 def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
@@ -63,6 +63,14 @@ def cpu_threads() -> int:
     if quota is not None:
         cores = min(cores, max(1, math.floor(quota)))
     return max(1, cores)
+
+
+def use_threads(threads: int) -> None:
+    """Make ``threads`` the process's setting (a Ray task that declared that many CPUs): torch's
+    pool and, through ``FS3D_THREADS``, every later :func:`cpu_threads` (the numba kernels)."""
+    threads = max(1, int(threads))
+    os.environ["FS3D_THREADS"] = str(threads)
+    torch.set_num_threads(threads)
 
 
 @contextmanager

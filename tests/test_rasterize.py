@@ -37,12 +37,14 @@ def weighted_loss(out, seed=123):
     return sum((t * w).sum() for t, w in zip((out.color, out.alpha, out.depth), weights))
 
 
+@pytest.mark.parametrize("backend", ["numba", "torch"])
 @pytest.mark.parametrize("seed,channels,background", [(0, 3, False), (1, 1, True), (2, 3, True), (3, 2, False)])
-def test_matches_reference_outputs_and_gradients(seed, channels, background):
+def test_matches_reference_outputs_and_gradients(seed, channels, background, backend):
+    # min_transmittance 0: the numba backend's exact mode (early termination is tested on its own).
     args, width, height = random_scene(seed, channels=channels)
     args = [t.clone().requires_grad_() for t in args]
     kwargs = {"background": torch.rand(channels, dtype=F64) if background else None}
-    fast = rasterize(*args, width, height, **kwargs)
+    fast = rasterize(*args, width, height, backend=backend, min_transmittance=0.0, **kwargs)
     ref = reference_rasterize(*args, width, height, **kwargs)
     assert fast.alpha.max() > 0.5 and (fast.radii > 0).sum() > 10  # a scene worth comparing
     for name in ("color", "alpha", "depth", "means2d", "depths"):
@@ -56,10 +58,11 @@ def test_matches_reference_outputs_and_gradients(seed, channels, background):
         torch.testing.assert_close(a, b, rtol=1e-7, atol=1e-9 * b.abs().max().item(), msg=name)
 
 
-def test_float32_matches_float64_reference():
+@pytest.mark.parametrize("backend", ["numba", "torch"])
+def test_float32_matches_float64_reference(backend):
     args, width, height = random_scene(5, n=60)
     ref = reference_rasterize(*args, width, height)
-    fast = rasterize(*[t.float() for t in args], width, height)
+    fast = rasterize(*[t.float() for t in args], width, height, backend=backend)
     assert fast.color.dtype == torch.float32
     torch.testing.assert_close(fast.color.double(), ref.color, atol=2e-5, rtol=0)
     torch.testing.assert_close(fast.alpha.double(), ref.alpha, atol=2e-5, rtol=0)

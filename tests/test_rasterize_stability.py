@@ -6,6 +6,8 @@ import torch
 
 from fingersplat3d.splat import rasterize, reference_rasterize
 
+_rasterize = rasterize
+
 WIDTH, HEIGHT = 20, 16
 
 
@@ -23,7 +25,17 @@ def base_scene(n=12, dtype=torch.float32, seed=0):
             "K": K.to(dtype)}
 
 
-def render_and_check(scene, renderer=rasterize, **kwargs):
+@pytest.fixture(params=["numba", "torch"], autouse=True)
+def backend(request, monkeypatch):
+    """Every extreme on both backends: ``rasterize`` below is the module's, rebound per backend."""
+    import functools
+
+    monkeypatch.setitem(globals(), "rasterize", functools.partial(_rasterize, backend=request.param))
+    return request.param
+
+
+def render_and_check(scene, renderer=None, **kwargs):
+    renderer = renderer or rasterize
     leaves = {k: v.clone().requires_grad_() for k, v in scene.items()}
     out = renderer(**leaves, width=WIDTH, height=HEIGHT, **kwargs)
     for name in ("color", "alpha", "depth", "means2d", "depths"):

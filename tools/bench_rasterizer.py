@@ -1,13 +1,19 @@
 """Throughput of the fast rasterizer on a finger-like scene.
 
     python tools/bench_rasterizer.py [--quick] [--out FILE.md] [--repeats 5] [--threads 2]
-                                     [--paths compiled,eager] [--tile-size 4]
+                                     [--paths numba,compiled,eager] [--tile-size 4]
+
+Paths: ``numba`` = the compiled CPU kernels (``backend="numba"``, the default on the CPU, early
+termination at 1e-4), ``compiled`` = the torch backend through torch.compile, ``eager`` = the
+torch backend as it is.
 
 The scene is a fitted-surface stand-in: Gaussians spread evenly over the camera-facing half of a
 cylinder (a finger, axis vertical) that fills ~40 % of a 640x512 image, flat disks tangent to the
 surface whose in-plane scale is the point spacing (neighbours overlap, as after fitting), opacity
 0.5..1 and a grayscale ridge pattern. The main figure is forward+backward of one 640x512 view with
-200k Gaussians (target <= 0.3 s on the project's 2-core machine); a sweep varies N and the scale.
+200k Gaussians (target <= 0.12 s on the project's 2-core machine); a sweep varies N, the scale and
+the image size (zoom 2: 1280x1024 with the focal length doubled, the same finger filling the same
+part of the picture).
 
 Throughput is counted in Gaussian-pixel pairs: ``pairs`` are the pairs with alpha >= 1/255 (the
 work the result depends on), ``evaluated`` the pairs the tiled compositor actually computes
@@ -36,7 +42,7 @@ RADIUS = 8.0  # mm
 LENGTH = 16.9  # mm along the axis: the finger covers ~45 % of the image
 
 
-def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int = 0):
+def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int = 0, zoom: int = 1):
     """``(means, quats, scales, opacities, colors, world_to_cam, K)`` float32, camera at the origin."""
     g = torch.Generator().manual_seed(seed)
     theta = (torch.rand(n, generator=g) - 0.5) * math.pi  # facing the camera: -90..90 degrees
@@ -53,16 +59,17 @@ def finger_scene(n: int, scale_factor: float = 1.0, channels: int = 1, seed: int
     opacities = 0.5 + 0.5 * torch.rand(n, generator=g)
     ridges = 0.5 + 0.4 * torch.sin(2 * math.pi * (means[:, 0] + 0.3 * means[:, 1]) / 0.45)
     colors = ridges[:, None].expand(n, channels).contiguous()
-    K = torch.tensor([[FOCAL, 0, (WIDTH - 1) / 2], [0, FOCAL, (HEIGHT - 1) / 2], [0, 0, 1]])
+    K = torch.tensor([[FOCAL * zoom, 0, (WIDTH * zoom - 1) / 2], [0, FOCAL * zoom, (HEIGHT * zoom - 1) / 2], [0, 0, 1]])
     return means, quats, scales, opacities, colors, torch.eye(4), K
 
 
-def count_pairs(scene, tile_size: int) -> tuple[int, int, float]:
+def count_pairs(scene, tile_size: int, zoom: int = 1) -> tuple[int, int, float]:
     """(pairs with alpha >= 1/255, pairs the compositor evaluates, fraction of the image covered)."""
     means, quats, scales, opacities, _, world_to_cam, K = scene
     with torch.no_grad():
-        proj, boxes = _project(means, quats, scales, world_to_cam, K, WIDTH, HEIGHT, 0.01, 0.3, opacities)
-        bins = bin_gaussians(boxes, proj.valid, proj.depths, WIDTH, HEIGHT, tile_size)
+        width, height = WIDTH * zoom, HEIGHT * zoom
+        proj, boxes = _project(means, quats, scales, world_to_cam, K, width, height, 0.01, 0.3, opacities)
+        bins = bin_gaussians(boxes, proj.valid, proj.depths, width, height, tile_size)
         table = torch.cat([proj.means2d, proj.conics, opacities[:, None]], 1)
         table = torch.cat([table, table.new_zeros(1, 6)])
         grid, _ = _grid(tile_size, torch.float32, means.device)
@@ -73,11 +80,11 @@ def count_pairs(scene, tile_size: int) -> tuple[int, int, float]:
                 params[..., :2] -= _tile_centres(tiles, bins, torch.float32)[:, None, :]
                 pairs += int((pair_alpha(params, grid)[0] > 0).sum())
                 evaluated += members.numel() * tile_size ** 2
-        covered = float((rasterize(*scene, WIDTH, HEIGHT).alpha > 0.5).float().mean())
+        covered = float((rasterize(*scene, width, height).alpha > 0.5).float().mean())
     return pairs, evaluated, covered
 
 
-def time_render(scene, repeats: int, tile_size: int, compiled: bool) -> tuple[float, float, float]:
+def time_render(scene, repeats: int, tile_size: int, path: str, zoom: int = 1) -> tuple[float, float, float]:
     """(median forward s, median backward s, fastest forward+backward s) of a render plus a loss."""
     leaves = [t.clone().requires_grad_() for t in scene[:5]] + list(scene[5:])
     forward, backward = [], []
@@ -85,7 +92,8 @@ def time_render(scene, repeats: int, tile_size: int, compiled: bool) -> tuple[fl
         for t in leaves[:5]:
             t.grad = None
         start = time.perf_counter()
-        out = rasterize(*leaves, WIDTH, HEIGHT, tile_size=tile_size, compiled=compiled)
+        out = rasterize(*leaves, WIDTH * zoom, HEIGHT * zoom, tile_size=tile_size, compiled=path == "compiled",
+                        backend="numba" if path == "numba" else "torch")
         loss = out.color.sum() + out.depth.sum()
         middle = time.perf_counter()
         loss.backward()
@@ -103,28 +111,31 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--tile-size", type=int, default=4)
-    parser.add_argument("--paths", default="compiled,eager", help="comma-separated: compiled, eager")
+    parser.add_argument("--paths", default="numba,compiled,eager", help="comma-separated: numba, compiled, eager")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    os.environ["FS3D_THREADS"] = str(args.threads)  # the numba kernels' thread count
     info = machine()
     start_load = tuple(round(x, 2) for x in info["load"])
-    header = ("| path | N | scale x | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
+    header = ("| path | N | scale x | image | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
               "fwd Mpairs/s | bwd Mpairs/s | load |")
     lines = [(f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
               f"tile {args.tile_size}, load average at start {start_load}"), "", header,
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print(lines[0], flush=True)
-    cases = [(200_000, 1.0)]
+    cases = [(200_000, 1.0, 1)]
     if not args.quick:
-        cases += [(25_000, 1.0), (50_000, 1.0), (100_000, 1.0), (400_000, 1.0), (200_000, 0.5), (200_000, 2.0),
-                  (200_000, 4.0)]
+        cases += [(25_000, 1.0, 1), (50_000, 1.0, 1), (100_000, 1.0, 1), (400_000, 1.0, 1), (200_000, 0.5, 1),
+                  (200_000, 2.0, 1), (200_000, 4.0, 1), (200_000, 1.0, 2), (400_000, 1.0, 2), (800_000, 1.0, 2)]
     for path in args.paths.split(","):
-        for n, factor in cases:
-            scene = finger_scene(n, factor)
-            pairs, evaluated, covered = count_pairs(scene, args.tile_size)
-            fwd, bwd, best = time_render(scene, args.repeats, args.tile_size, path == "compiled")
-            row = (f"| {path} | {n // 1000}k | {factor:g} | {covered:.0%} | {pairs / 1e6:.1f} | {evaluated / 1e6:.1f} | "
+        for n, factor, zoom in cases:
+            scene = finger_scene(n, factor, zoom=zoom)
+            pairs, evaluated, covered = count_pairs(scene, args.tile_size, zoom)
+            fwd, bwd, best = time_render(scene, args.repeats, args.tile_size, path, zoom)
+            evaluated_text = "–" if path == "numba" else f"{evaluated / 1e6:.1f}"
+            row = (f"| {path} | {n // 1000}k | {factor:g} | {WIDTH * zoom}x{HEIGHT * zoom} | {covered:.0%} | "
+                   f"{pairs / 1e6:.1f} | {evaluated_text} | "
                    f"{fwd:.3f} | {bwd:.3f} | {fwd + bwd:.3f} ({best:.3f}) | {pairs / fwd / 1e6:.0f} | "
                    f"{pairs / bwd / 1e6:.0f} | {os.getloadavg()[0]:.1f} |")
             lines.append(row)

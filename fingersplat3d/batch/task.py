@@ -86,11 +86,10 @@ def record_failure(out: Path, row: dict) -> Path:
 
 def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
     """Fuse ``job`` into ``out/<name>/``; the row of the results table (``status``: done, not_registered, failed)."""
-    import torch
-
+    from ..device import use_threads
     from ..pipeline import fuse, write_reconstruction_files
 
-    torch.set_num_threads(max(1, options.threads))
+    use_threads(options.threads)
     out = Path(out)
     started = time.perf_counter()
     row = {"capture": job.name, "status": "failed", "reason": "", "seconds": None, "peak_rss_mb": None,

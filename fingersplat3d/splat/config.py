@@ -88,10 +88,17 @@ class SplatConfig:
     # --- rendering -----------------------------------------------------------------------------
     near_fraction: float = 0.01
     """Near plane as a fraction of the camera-to-finger distance."""
+    rasterizer: str = "auto"
+    """Rasterizer backend while fitting (:func:`~fingersplat3d.splat.rasterize.rasterize`): ``auto``
+    (the compiled ``numba`` kernels on the CPU, ``torch`` on a GPU), ``numba`` or ``torch``."""
     seed: int = 0
     """Seed of the view order and of densification."""
 
     def __post_init__(self) -> None:
+        from .rasterize import BACKENDS
+
+        if self.rasterizer not in BACKENDS:
+            raise ValueError(f"SplatConfig.rasterizer must be one of {', '.join(BACKENDS)}, got {self.rasterizer!r}")
         if self.iterations < 0:
             raise ValueError("SplatConfig.iterations must be >= 0")
         if not 0.0 <= self.lambda_dssim <= 1.0:

@@ -122,10 +122,10 @@ def render_camera(gaussians: Gaussians, camera: Camera, near: float, world_to_ca
 
 
 def _render(model: Gaussians, world_to_cam: torch.Tensor, K: torch.Tensor, width: int, height: int, near: float,
-            background: torch.Tensor | None = None) -> RenderOutput:
+            background: torch.Tensor | None = None, backend: str = "auto") -> RenderOutput:
     """Rasterize raw parameters: activated scales and opacities, SH DC colour clamped at 0 (as 3DGS)."""
     return rasterize(model.means, model.quats, model.scales, model.opacities, sh_to_rgb(model.sh_dc).clamp_min(0.0),
-                     world_to_cam, K, width, height, near=near, background=background)
+                     world_to_cam, K, width, height, near=near, background=background, backend=backend)
 
 
 def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: int, device) -> tuple:
@@ -182,7 +182,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         pose = target.world_to_cam
         if config.refine_poses and v != 0:
             pose = apply_pose_correction(pose, rotation[v], translation[v])
-        out = _render(current, pose, target.K, target.width, target.height, nears[v])
+        out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer)
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background

@@ -20,8 +20,12 @@ from .binning import bin_gaussians
 from .composite import EAGER_KERNELS, composite_tiles
 from .project import _check, _project
 
-__all__ = ["RenderOutput", "rasterize"]
+__all__ = ["BACKENDS", "RenderOutput", "rasterize", "resolve_backend"]
 
+BACKENDS = ("auto", "numba", "torch")
+MIN_TRANSMITTANCE = 1e-4
+"""Early termination of the ``numba`` backend (3DGS, gsplat): a pixel stops before the Gaussian that
+would bring its transmittance below this, so what it leaves out weighs at most 1e-4 of a feature."""
 ALPHA_FOR_DEPTH = 1e-6
 """Expected depth is ``sum(w z) / alpha`` only where alpha exceeds this; 0 elsewhere."""
 
@@ -33,6 +37,17 @@ class RenderOutput(NamedTuple):
     means2d: Tensor  # [N, 2] projected centres in pixels, part of the graph (call .retain_grad() on it)
     radii: Tensor  # [N] int32 pixel radius of the 3-sigma footprint, 0 for culled Gaussians
     depths: Tensor  # [N] camera z of each centre
+
+
+def resolve_backend(backend: str, device: torch.device) -> str:
+    """``auto`` -> ``numba`` for CPU tensors, ``torch`` elsewhere; ``numba`` needs CPU tensors."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if device.type == "cpu" else "torch"
+    if backend == "numba" and device.type != "cpu":
+        raise ValueError(f"the numba backend runs on the CPU; these tensors are on {device}")
+    return backend
 
 
 def check_render_inputs(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
@@ -64,7 +79,8 @@ def finish_render(color: Tensor, alpha: Tensor, depth_sum: Tensor, background: T
 def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
               world_to_cam: Tensor, K: Tensor, width: int, height: int, *, near: float = 0.01,
               background: Tensor | None = None, low_pass: float = 0.3, tile_size: int = 4,
-              compiled: bool = False) -> RenderOutput:
+              compiled: bool = False, backend: str = "auto",
+              min_transmittance: float = MIN_TRANSMITTANCE) -> RenderOutput:
     """Render N Gaussians into one ``width`` x ``height`` view.
 
     means [N, 3] world; quats [N, 4] wxyz, any norm (zero = identity); scales [N, 3] standard
@@ -73,17 +89,37 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
     ``compiled=True`` runs the projection and the compositing through ``torch.compile`` kernels
     (:mod:`.compiled`): faster after a one-off compile of tens of seconds (then cached by
     inductor on disk), same results to float rounding.
+
+    ``backend``: ``numba`` composites with the compiled CPU kernels (:mod:`.cpu_composite`: exact
+    ellipse-tile overlap, early termination at ``min_transmittance``; 0 gives the exact sum),
+    ``torch`` with the tensor kernels (any device, exact sum, ``tile_size``/``compiled`` apply),
+    ``auto`` = ``numba`` for CPU tensors, ``torch`` elsewhere.
     """
     check_render_inputs(means, quats, scales, opacities, colors, world_to_cam, K, width, height, near,
                         background, low_pass)
     if int(tile_size) != tile_size or tile_size < 1:
         raise ValueError(f"tile_size must be a positive integer, got {tile_size}")
+    backend = resolve_backend(backend, means.device)
     width, height = int(width), int(height)
-    projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
-                                 float(low_pass), opacities, compiled)
-    bins = bin_gaussians(boxes, projection.valid, projection.depths, width, height, tile_size)
+    if backend == "numba":
+        from .cpu_raster import project_cpu
+
+        projection, boxes = project_cpu(means, quats, scales, opacities, world_to_cam, K, width, height, float(near),
+                                        float(low_pass))
+    else:
+        projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
+                                     float(low_pass), opacities, compiled)
     channels = colors.shape[1]
     feats = torch.cat([colors, torch.ones_like(colors[:, :1]), projection.depths[:, None]], 1)  # [N, C + 2]
+    if backend == "numba":
+        from .cpu_raster import composite_cpu
+
+        image = composite_cpu(projection.means2d, projection.conics, opacities, feats, boxes, projection.valid,
+                              projection.depths, width, height, min_transmittance)
+        color, alpha, depth_sum = image[..., :channels], image[..., channels], image[..., channels + 1]
+        color, depth = finish_render(color, alpha, depth_sum, background)
+        return RenderOutput(color, alpha, depth, projection.means2d, projection.radii, projection.depths)
+    bins = bin_gaussians(boxes, projection.valid, projection.depths, width, height, tile_size)
     kernels = EAGER_KERNELS
     if compiled:
         from .compiled import compiled_kernels  # torch.compile machinery only when asked for

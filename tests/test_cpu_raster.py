@@ -1,0 +1,113 @@
+"""The compiled CPU rasterizer (numba): early termination, binning, threads, projection twin."""
+import numpy as np
+import pytest
+import torch
+
+from fingersplat3d.splat import rasterize
+from fingersplat3d.splat.cpu_raster import depth_order, project_cpu
+from fingersplat3d.splat.project import _project
+from fingersplat3d.splat.rasterize import MIN_TRANSMITTANCE
+
+from test_rasterize import random_scene, weighted_loss
+
+F64 = torch.float64
+
+
+def opaque_stack(n=40, seed=0, dtype=F64):
+    """Many nearly opaque, wide Gaussians stacked in front of a 32x24 camera: transmittance
+    reaches 1e-4 after a few of them at every covered pixel."""
+    args, width, height = random_scene(seed, n=n, channels=2, dtype=dtype, width=32, height=24)
+    args[0][:, :2] *= 0.3
+    args[0][:, 2] = torch.linspace(2.0, 4.0, n, dtype=dtype)
+    args[2][:] = 0.4
+    args[3][:] = 0.98
+    return args, width, height
+
+
+def test_early_termination_leaves_out_less_than_the_threshold():
+    args, width, height = opaque_stack()
+    exact = rasterize(*args, width, height, backend="numba", min_transmittance=0.0)
+    early = rasterize(*args, width, height, backend="numba")
+    assert (1.0 - exact.alpha).min() < 1e-8  # deep stacks: termination really happens
+    weight_left_out = (early.alpha - exact.alpha).abs()
+    assert weight_left_out.max() > 0 and weight_left_out.max() <= MIN_TRANSMITTANCE
+    feature_bound = MIN_TRANSMITTANCE * args[4].abs().max()
+    assert (early.color - exact.color).abs().max() <= feature_bound + 1e-12
+    # The backward of the truncated sum is the exact backward of what was composited: gradients
+    # agree with the exact ones up to what the left-out Gaussians would have contributed.
+    leaves = [t.clone().requires_grad_() for t in args]
+    grads_early = torch.autograd.grad(weighted_loss(rasterize(*leaves, width, height, backend="numba")), leaves[:5])
+    grads_exact = torch.autograd.grad(
+        weighted_loss(rasterize(*leaves, width, height, backend="numba", min_transmittance=0.0)), leaves[:5])
+    for a, b in zip(grads_early, grads_exact):
+        assert torch.isfinite(a).all()
+        assert (a - b).abs().max() <= 1e-2 * b.abs().max() + 1e-12  # + rounding where the gradient is ~0
+
+
+def test_exact_mode_matches_the_torch_backend_on_the_stack():
+    args, width, height = opaque_stack(seed=1)
+    leaves = [t.clone().requires_grad_() for t in args]
+    outs = {b: rasterize(*leaves, width, height, backend=b, min_transmittance=0.0) for b in ("numba", "torch")}
+    torch.testing.assert_close(outs["numba"].color, outs["torch"].color, rtol=1e-9, atol=1e-10)
+    grads = {b: torch.autograd.grad(weighted_loss(o), leaves) for b, o in outs.items()}
+    for a, b in zip(grads["numba"], grads["torch"]):
+        torch.testing.assert_close(a, b, rtol=1e-7, atol=1e-9 * max(b.abs().max().item(), 1.0))
+
+
+def test_projection_twin_matches_the_tensor_projection():
+    # Everything the rasterizer uses, culled and clamped Gaussians included, plus the boxes.
+    args, width, height = random_scene(4, n=80)
+    args[0][:3, 0] = torch.tensor([9.0, -9.0, 0.0], dtype=F64)  # beyond the frustum clamp
+    args[2][:3] = 2.0
+    means, quats, scales, opacities, _, world_to_cam, K = [t.clone().requires_grad_() for t in args]
+    twin, twin_boxes = project_cpu(means, quats, scales, opacities, world_to_cam, K, width, height, 0.01, 0.3)
+    ref, ref_boxes = _project(means, quats, scales, world_to_cam, K, width, height, 0.01, 0.3, opacities)
+    assert torch.equal(twin.valid, ref.valid) and torch.equal(twin.radii, ref.radii)
+    assert torch.equal(twin_boxes[twin.valid], ref_boxes[ref.valid])
+    for name in ("means2d", "conics", "cov2d", "depths"):
+        torch.testing.assert_close(getattr(twin, name), getattr(ref, name), rtol=1e-12, atol=1e-12, msg=name)
+    g = torch.Generator().manual_seed(0)
+    weights = [torch.randn(t.shape, generator=g, dtype=F64) for t in (ref.means2d, ref.conics, ref.depths)]
+
+    def loss(p):
+        return sum((t * w).sum() for t, w in zip((p.means2d, p.conics, p.depths), weights))
+
+    leaves = (means, quats, scales, world_to_cam, K)
+    for name, a, b in zip(("means", "quats", "scales", "world_to_cam", "K"), torch.autograd.grad(loss(twin), leaves),
+                          torch.autograd.grad(loss(ref), leaves)):
+        torch.testing.assert_close(a, b, rtol=1e-9, atol=1e-9 * b.abs().max().item(), msg=name)
+
+
+def test_thread_count_does_not_change_the_result(monkeypatch):
+    args, width, height = random_scene(6, n=300, dtype=torch.float32, width=70, height=50)
+    results = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("FS3D_THREADS", threads)
+        leaves = [t.clone().requires_grad_() for t in args]  # the pose and K included
+        out = rasterize(*leaves, width, height, backend="numba")
+        results.append((out.color, torch.autograd.grad(weighted_loss(out), leaves)))
+    assert torch.equal(results[0][0], results[1][0])
+    for a, b in zip(results[0][1], results[1][1]):
+        assert torch.equal(a, b)  # no atomics, no per-thread partial sums: bitwise the same
+
+
+def test_depth_order_is_a_stable_sort_with_ties_in_index_order():
+    depths = np.array([3.0, 1.0, 2.0, 1.0, -1.0, 2.0, 1.0], np.float32)
+    valid = np.array([True, True, True, True, False, True, True])
+    assert depth_order(depths, valid).tolist() == [1, 3, 6, 2, 5, 0]
+    rng = np.random.default_rng(0)
+    many = rng.integers(1, 50, 5000).astype(np.float32) * np.float32(0.25)
+    keep = rng.random(5000) > 0.1
+    expected = np.flatnonzero(keep)[np.argsort(many[keep], kind="stable")]
+    assert np.array_equal(depth_order(many, keep), expected)
+    assert np.array_equal(depth_order(many.astype(np.float64), keep), expected)
+
+
+def test_numba_backend_refuses_other_devices_and_unknown_names():
+    args, width, height = random_scene(0, n=5)
+    with pytest.raises(ValueError, match="backend must be one of"):
+        rasterize(*args, width, height, backend="gsplat-cpu")
+    with pytest.raises(ValueError, match="min_transmittance"):
+        rasterize(*args, width, height, backend="numba", min_transmittance=1.0)
+    with pytest.raises(ValueError, match="runs on the CPU"):
+        rasterize(*[t.to("meta") for t in args], width, height, backend="numba")
