@@ -104,10 +104,10 @@ def test_cpu_composite_backward_gradcheck(seed):
 
     means, quats, scales, opacities, colors, world_to_cam, K = small_scene(seed, n=6, channels=1)
     proj, boxes = _project(means, quats, scales, world_to_cam, K, WIDTH, HEIGHT, 0.01, 0.3, opacities)
-    feats = torch.cat([colors, torch.ones_like(colors), proj.depths[:, None]], 1)
+    feats = torch.cat([colors, proj.depths[:, None]], 1)
     inputs = [t.detach().clone().requires_grad_() for t in (proj.means2d, proj.conics, opacities, feats)]
 
-    def composite(means2d, conics, opacities, feats):
+    def composite(means2d, conics, opacities, feats):  # image and alpha
         return composite_cpu(means2d, conics, opacities, feats, boxes, proj.valid, proj.depths, WIDTH, HEIGHT, 0.0)
 
     assert torch.autograd.gradcheck(composite, inputs, eps=1e-6, atol=1e-6, rtol=1e-4)

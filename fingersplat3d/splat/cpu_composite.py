@@ -207,8 +207,10 @@ def _tile_rect(t, tiles_x, width, height):
 def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks):
     """Front-to-back compositing of the tile lists (``pairs`` from :func:`gather_pairs`). Returns
     ``(image [H, W, F] float64, final transmittance [H, W] float64, consumed [H, W] int32)``:
-    ``consumed`` = list entries a pixel walked before stopping. Tiles are dealt to ``chunks``
-    interleaved chunks, one parallel task each."""
+    ``consumed`` = list entries a pixel walked before it stopped (the whole list where it never
+    did; only the entries it composited matter to the backward, which re-tests the same alpha
+    threshold). The accumulated opacity is ``1 - final``: no feature column of ones is needed.
+    Tiles are dealt to ``chunks`` interleaved chunks, one parallel task each."""
     n_feats = pairs.shape[1] - FEATS
     image = np.zeros((height, width, n_feats))
     final = np.ones((height, width))
@@ -226,7 +228,7 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
             tx0, ty0, tx1, ty1 = _tile_rect(t, tiles_x, width, height)
             trans[:] = 1.0
             acc[:] = 0.0
-            used[:] = 0
+            used[:] = end - first  # a pixel that never stops walks the whole list
             alive = (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
             for j in range(first, end):
                 rec = pairs[j]
@@ -253,8 +255,8 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
                         for f in range(n_feats):
                             acc[py, px, f] += weight * feat[f]
                         trans[py, px] *= 1.0 - alpha
-                        used[py, px] = j - first + 1
                         if trans[py, px] < min_transmittance:
+                            used[py, px] = j - first + 1
                             alive -= 1
                     row_falloff *= ratio_y
                     ratio_y *= ec
@@ -271,9 +273,10 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
 
 
 @njit(cache=True, parallel=True)
-def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, chunks):
-    """Gradients of ``sum(image * grad_image)`` per tile pair: ``[M, 6 + F]`` float64, columns
-    (mx, my, a, b, c, opacity, feats...), rows as ``pairs`` (see :func:`reduce_pairs`)."""
+def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
+    """Gradients of ``sum(image * grad_image) + sum((1 - final) * grad_alpha_image)`` per tile pair:
+    ``[M, 6 + F]`` float64, columns (mx, my, a, b, c, opacity, feats...), rows as ``pairs`` (see
+    :func:`reduce_pairs`). d(1 - T_final)/d alpha_k = T_final / (1 - alpha_k)."""
     n_feats = pairs.shape[1] - FEATS
     pair_grads = np.zeros((pairs.shape[0], 6 + n_feats))
     num_tiles = starts.shape[0] - 1
@@ -282,6 +285,7 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
         behind = np.empty((TILE, TILE, n_feats))
         upstream = np.empty((TILE, TILE, n_feats))
         used = np.empty((TILE, TILE), np.int32)
+        opacity_up = np.empty((TILE, TILE))  # dL/d(1 - T_final) * T_final per pixel
         feat = np.empty(n_feats)
         for t in range(chunk, num_tiles, chunks):
             first, end = starts[t], starts[t + 1]
@@ -293,6 +297,7 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
                 for x in range(tx0, tx1 + 1):
                     py, px = y - ty0, x - tx0
                     trans[py, px] = final[y, x]
+                    opacity_up[py, px] = grad_alpha_image[y, x] * final[y, x]
                     used[py, px] = consumed[y, x]
                     deepest = max(deepest, consumed[y, x])
                     for f in range(n_feats):
@@ -329,7 +334,7 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
                         before = trans[py, px] * inverse  # T_k, the transmittance in front of Gaussian k
                         trans[py, px] = before
                         weight = alpha * before
-                        grad_alpha = 0.0
+                        grad_alpha = opacity_up[py, px] * inverse
                         for f in range(n_feats):
                             up = upstream[py, px, f]
                             local[6 + f] += weight * up

@@ -62,25 +62,26 @@ class _CompositeCPU(torch.autograd.Function):
                                                    chunks)
         ctx.state = (starts, pairs, offsets, slots, final, consumed, width, height, tiles_x)
         ctx.order, ctx.num = torch.from_numpy(order), means2d.shape[0]
-        return torch.from_numpy(image).to(feats.dtype)
+        return torch.from_numpy(image).to(feats.dtype), torch.from_numpy(1.0 - final).to(feats.dtype)
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, grad_image: Tensor):
+    def backward(ctx, grad_image: Tensor, grad_alpha: Tensor):
         starts, pairs, offsets, slots, final, consumed, width, height, tiles_x = ctx.state
         chunks = kernel_threads()
         pair_grads = composite_backward(starts, pairs, width, height, tiles_x, final, consumed, _numpy(grad_image),
-                                        chunks)
+                                        _numpy(grad_alpha), chunks)
         per_drawn = torch.from_numpy(reduce_pairs(pair_grads, offsets, slots)).to(grad_image.dtype)
         total = grad_image.new_zeros(ctx.num, per_drawn.shape[1]).index_copy_(0, ctx.order, per_drawn)
         return total[:, 0:2], total[:, 2:5], total[:, 5], total[:, 6:], None, None, None, None, None, None
 
 
 def composite_cpu(means2d: Tensor, conics: Tensor, opacities: Tensor, feats: Tensor, boxes: Tensor, valid: Tensor,
-                  depths: Tensor, width: int, height: int, min_transmittance: float) -> Tensor:
-    """Composite the drawn (``valid``) Gaussians front to back into ``[H, W, F]`` = sum_i w_i feat_i
-    (``means2d`` [N, 2], ``conics`` [N, 3], ``opacities`` [N], ``feats`` [N, F], ``boxes`` [N, 4]
-    inclusive pixel boxes, ``depths`` [N] for the order). CPU tensors only."""
+                  depths: Tensor, width: int, height: int, min_transmittance: float) -> tuple[Tensor, Tensor]:
+    """Composite the drawn (``valid``) Gaussians front to back into ``(image [H, W, F] = sum_i w_i
+    feat_i, alpha [H, W] = sum_i w_i)`` (``means2d`` [N, 2], ``conics`` [N, 3], ``opacities`` [N],
+    ``feats`` [N, F], ``boxes`` [N, 4] inclusive pixel boxes, ``depths`` [N] for the order). CPU
+    tensors only."""
     if not 0.0 <= min_transmittance < 1.0:
         raise ValueError(f"min_transmittance must be in [0, 1), got {min_transmittance}")
     return _CompositeCPU.apply(means2d, conics, opacities, feats, boxes, valid, depths, int(width), int(height),

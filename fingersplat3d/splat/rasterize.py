@@ -110,15 +110,15 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
         projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
                                      float(low_pass), opacities, compiled)
     channels = colors.shape[1]
-    feats = torch.cat([colors, torch.ones_like(colors[:, :1]), projection.depths[:, None]], 1)  # [N, C + 2]
     if backend == "numba":
         from .cpu_raster import composite_cpu
 
-        image = composite_cpu(projection.means2d, projection.conics, opacities, feats, boxes, projection.valid,
-                              projection.depths, width, height, min_transmittance)
-        color, alpha, depth_sum = image[..., :channels], image[..., channels], image[..., channels + 1]
-        color, depth = finish_render(color, alpha, depth_sum, background)
+        feats = torch.cat([colors, projection.depths[:, None]], 1)  # [N, C + 1]; alpha is 1 - final transmittance
+        image, alpha = composite_cpu(projection.means2d, projection.conics, opacities, feats, boxes, projection.valid,
+                                     projection.depths, width, height, min_transmittance)
+        color, depth = finish_render(image[..., :channels], alpha, image[..., channels], background)
         return RenderOutput(color, alpha, depth, projection.means2d, projection.radii, projection.depths)
+    feats = torch.cat([colors, torch.ones_like(colors[:, :1]), projection.depths[:, None]], 1)  # [N, C + 2]
     bins = bin_gaussians(boxes, projection.valid, projection.depths, width, height, tile_size)
     kernels = EAGER_KERNELS
     if compiled:
