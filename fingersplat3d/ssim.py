@@ -4,7 +4,8 @@ An 11x11 Gaussian window (sigma 1.5), ``C1 = 0.01^2``, ``C2 = 0.03^2`` (data ran
 population (not sample) covariance: the settings of the 3DGS training code and of Wang et al.'s
 reference. The window is separable, so the five blurred images are filtered in one batch along
 rows then columns (22 taps instead of 121; the 2D convolution's backward dominated a fitting
-step on the CPU). Borders: ``zeros`` pads with zeros as 3DGS training does; ``reflect`` mirrors the
+step on the CPU), as shifted multiply-adds with a hand-written adjoint (the same blur: the window
+is symmetric). Borders: ``zeros`` pads with zeros as 3DGS training does; ``reflect`` mirrors the
 image (without repeating the edge pixel), so that nothing outside the image counts, as an
 evaluation score should. ``tests/test_ssim.py`` checks it against scikit-image's
 ``structural_similarity`` with Wang et al.'s settings.
@@ -40,6 +41,38 @@ def image_pair(render: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor
     return render, target.to(dtype=render.dtype, device=render.device)
 
 
+def _valid_blur(stack: torch.Tensor, taps: tuple[float, ...]) -> torch.Tensor:
+    """The separable window without padding (``[..., H, W]`` -> ``[..., H - 10, W - 10]``): shifted
+    multiply-adds along rows then columns, which on the CPU run ~3x faster than a grouped conv2d."""
+    k = len(taps)
+    height, width = stack.shape[-2] - k + 1, stack.shape[-1] - k + 1
+    rows = stack[..., :, 0:width] * taps[0]
+    for i in range(1, k):
+        rows.add_(stack[..., :, i:i + width], alpha=taps[i])
+    out = rows[..., 0:height, :] * taps[0]
+    for i in range(1, k):
+        out.add_(rows[..., i:i + height, :], alpha=taps[i])
+    return out
+
+
+class _Blur(torch.autograd.Function):
+    """Zero-pad by ``pad`` then :func:`_valid_blur`. The window is symmetric, so the adjoint is the
+    same blur of the gradient zero-padded by the window's full width, cropped by ``pad``."""
+
+    @staticmethod
+    def forward(ctx, stack: torch.Tensor, taps: tuple[float, ...], pad: int) -> torch.Tensor:
+        ctx.taps, ctx.pad = taps, pad
+        return _valid_blur(F.pad(stack, (pad, pad, pad, pad)) if pad else stack, taps)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        full = len(ctx.taps) - 1
+        grad_stack = _valid_blur(F.pad(grad, (full, full, full, full)), ctx.taps)
+        if ctx.pad:
+            grad_stack = grad_stack[..., ctx.pad:-ctx.pad, ctx.pad:-ctx.pad]
+        return grad_stack, None, None
+
+
 def ssim_map(render: torch.Tensor, target: torch.Tensor, *, padding: str = "zeros") -> torch.Tensor:
     """Per-pixel SSIM ``[H, W, C]`` of two images of one shape; ``padding``: ``zeros`` or ``reflect``."""
     if padding not in ("zeros", "reflect"):
@@ -51,14 +84,12 @@ def ssim_map(render: torch.Tensor, target: torch.Tensor, *, padding: str = "zero
     pad = SSIM_WINDOW // 2
     taps = torch.arange(SSIM_WINDOW, dtype=torch.float64) - (SSIM_WINDOW - 1) / 2.0
     g = torch.exp(-(taps * taps) / (2.0 * SSIM_SIGMA * SSIM_SIGMA))
-    g = (g / g.sum()).to(dtype=render.dtype, device=render.device)
+    g = g / g.sum()
     stack = torch.cat([x, y, x * x, y * y, x * y], dim=1)  # [1, 5C, H, W]
-    groups = stack.shape[1]
     if padding == "reflect":
         stack = F.pad(stack, (pad, pad, pad, pad), mode="reflect")
         pad = 0
-    rows = F.conv2d(stack, g.view(1, 1, 1, -1).expand(groups, 1, 1, SSIM_WINDOW), padding=(0, pad), groups=groups)
-    blurred = F.conv2d(rows, g.view(1, 1, -1, 1).expand(groups, 1, SSIM_WINDOW, 1), padding=(pad, 0), groups=groups)
+    blurred = _Blur.apply(stack, tuple(g.tolist()), pad)
     mu_x, mu_y, e_xx, e_yy, e_xy = blurred.split(channels, dim=1)
     mu_xx, mu_yy, mu_xy = mu_x * mu_x, mu_y * mu_y, mu_x * mu_y
     numerator = (2.0 * mu_xy + SSIM_C1) * (2.0 * (e_xy - mu_xy) + SSIM_C2)
