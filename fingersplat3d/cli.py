@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import time
 from dataclasses import replace
@@ -10,7 +11,7 @@ from pathlib import Path
 
 from . import __version__
 from .align.global_opt import GlobalAlignConfig
-from .atomic import check_free
+from .atomic import atomic_dir, check_free
 from .align.register import MATCHERS, RegistrationConfig
 from .errors import EXIT_INCOMPLETE, EXIT_INPUT, EXIT_NOT_REGISTERED, FS3DError, InputError
 from .splat.config import DEFAULT_PRESET, PRESETS, preset
@@ -74,6 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render(commands)
     _add_batch(commands)
     _add_rig(commands)
+    _add_eval(commands)
     return parser
 
 
@@ -351,6 +353,56 @@ def _add_rig(commands) -> None:
                                 "(default 0; each round costs one more registration per capture, see the README)")
     calibrate.add_argument("--overwrite", action="store_true", help="replace an existing file")
     calibrate.set_defaults(run=_run_rig_calibrate)
+
+
+def _add_eval(commands) -> None:
+    """``fs3d eval depth``: its arguments."""
+    evaluate = commands.add_parser("eval", help="the paper's experiments: depth error against ground truth",
+                                   description="Evaluate reconstructions against ground truth.")
+    actions = evaluate.add_subparsers(dest="action", metavar="ACTION", required=True)
+    depth = actions.add_parser(
+        "depth", help="depth error against PolyU 3D+ height maps or a capture's depth/",
+        description="Reconstruct each image alone (monocular mode) and compare its depth with the height map of the "
+                    "same name in --truth (PolyU 3D+ .mat files: the variable 'fc', flipped upside down), or fuse "
+                    "capture folders and compare every view with its depth/. Mean absolute error after a "
+                    "least-squares scale + shift, after a scale only, and weighted by the reconstruction's "
+                    "confidence. Writes depth_errors.csv, summary.md and error_maps/.")
+    depth.add_argument("inputs", nargs="+", type=Path, help="images or folders of images (with --truth), or capture folders")
+    depth.add_argument("--truth", type=Path, help="folder of .mat height maps named after the images")
+    depth.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
+    depth.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    depth.set_defaults(run=_run_eval_depth)
+
+
+def _run_eval_depth(args: argparse.Namespace) -> int:
+    from .experiments.depth import capture_cases, polyu_cases, run_depth_evaluation
+    from .pipeline import FuseConfig
+
+    check_free(args.output, args.overwrite)
+    unpaired = ([], [])
+    if args.truth is not None:
+        cases, *unpaired = polyu_cases(args.inputs, args.truth)
+        if not cases:
+            raise InputError(f"no image in {', '.join(map(str, args.inputs))} has a height map of the same name in {args.truth}")
+        for path in unpaired[0]:
+            print(f"fs3d eval depth: {path} has no height map in {args.truth}; skipped", file=sys.stderr)
+        for path in unpaired[1]:
+            print(f"fs3d eval depth: {path} has no image; skipped", file=sys.stderr)
+    else:
+        cases = capture_cases(args.inputs)
+    with atomic_dir(args.output, overwrite=args.overwrite) as folder:  # complete or absent
+        rows = run_depth_evaluation(cases, folder, FuseConfig(splat=None), unpaired=tuple(unpaired))
+    done = [r for r in rows if r["status"] == "done"]
+    if done:
+        print(f"wrote {args.output}: {len(done)} of {len(rows)} scored; mean MAE after scale + shift "
+              f"{statistics.mean(r['mae_scale_shift'] for r in done):.4f}, confidence-weighted "
+              f"{statistics.mean(r['mae_weighted'] for r in done):.4f} (ground-truth units)")
+    failed = len(rows) - len(done)
+    if failed:
+        print(f"fs3d eval depth: {failed} of {len(rows)} could not be scored (see {args.output / 'summary.md'})",
+              file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _run_batch(args: argparse.Namespace) -> int:

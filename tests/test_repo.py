@@ -27,7 +27,7 @@ LAYERS = [
     {"synth"},
     {"io", "mesh", "viz"},
     {"pipeline"},
-    {"batch"},
+    {"batch", "experiments"},
     {"cli"},
 ]
 
