@@ -3,16 +3,18 @@
 Organised as gsplat's CUDA kernels are, for CPU threads instead of thread blocks:
 
 * **Binning.** The image is cut into ``TILE`` x ``TILE`` tiles. A Gaussian is listed in a tile only
-  where its alpha >= 1/255 ellipse really meets the tile (exact ellipse-tile overlap, row by row,
-  not its bounding box). Gaussians are visited front to back, so a stable counting sort by tile
-  leaves every tile's list in depth order.
-* **Forward.** One tile at a time per thread; each Gaussian of the list is evaluated only on the
-  pixels of the rows its ellipse crosses, and only between that row's two ellipse crossings.
-  Front-to-back compositing with early termination: a pixel stops after the Gaussian that brings
-  its transmittance below ``min_transmittance``, so the weight it leaves out is below that (3DGS and
-  gsplat stop *before* that Gaussian at 1e-4, which can leave out up to 1e-4 / (1 - 0.99) = 1 %);
-  0 gives the exact sum, identical to the reference rasterizer. The final transmittance and the number of list
-  entries a pixel consumed are saved for the backward.
+  where its alpha >= 1/255 ellipse really meets the tile (exact ellipse-tile overlap per band of
+  rows, not its bounding box). Gaussians are visited front to back, so a stable counting sort by
+  tile leaves every tile's list in depth order.
+* **Forward.** One tile at a time per thread; each Gaussian of the list is evaluated on its pixel
+  box inside the tile, the falloff formed by products along rows and columns (three exps per
+  tile-Gaussian pair, not one per pixel; measured as fast as clipping every row to the ellipse,
+  which costs a square root and two divisions per row). Front-to-back compositing with early
+  termination: a pixel stops after the Gaussian that brings its transmittance below
+  ``min_transmittance``, so the weight it leaves out is below that (3DGS and gsplat stop *before*
+  that Gaussian at 1e-4, which can leave out up to 1e-4 / (1 - 0.99) = 1 %); 0 gives the exact
+  sum, identical to the reference rasterizer. The final transmittance (opacity = 1 - it) and, for
+  pixels that stopped, where they stopped are saved for the backward.
 * **Backward.** Each tile's list is walked back to front from the saved final transmittance
   (T_k = T_{k+1} / (1 - alpha_k), 1 - alpha >= 0.01), with the colour behind each Gaussian
   accumulated on the way; gradients of one Gaussian are summed over the tile's pixels into that
