@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-__all__ = ["sample_bilinear"]
+__all__ = ["sample_bilinear", "sample_nearest"]
 
 
 def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -19,4 +19,17 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
     values = np.full(len(uv), np.nan)
     if inside.any():
         values[inside] = map_coordinates(image, [uv[inside, 1], uv[inside, 0]], order=1, mode="nearest")
+    return values
+
+
+def sample_nearest(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``image [H, W]`` at ``uv [N, 2]``: the nearest pixel's value (no blending across an edge of
+    a depth map), NaN outside the image."""
+    image = np.asarray(image)
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    height, width = image.shape
+    col, row = np.rint(uv[:, 0]), np.rint(uv[:, 1])
+    inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    values = np.full(len(uv), np.nan)
+    values[inside] = image[row[inside].astype(int), col[inside].astype(int)]
     return values

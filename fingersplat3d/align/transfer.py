@@ -18,6 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..sampling import sample_nearest
 from ..scene import Camera
 
 __all__ = ["STATUSES", "transfer_points", "warp_image", "surface_tolerance"]
@@ -34,22 +35,12 @@ def surface_tolerance(depth: np.ndarray) -> float:
     return TOLERANCE_FRACTION * float(np.median(finite)) if finite.size else 0.0
 
 
-def _sample_nearest(depth: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Depth at the nearest pixel of each ``uv`` (NaN outside the image)."""
-    h, w = depth.shape
-    out = np.full(len(uv), np.nan)
-    col, row = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-    inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    out[inside] = depth[row[inside].astype(int), col[inside].astype(int)]
-    return out
-
-
 def transfer_points(uv_a: np.ndarray, depth_a: np.ndarray, camera_a: Camera, depth_b: np.ndarray,
                     camera_b: Camera, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pixels ``uv_a`` [N, 2] of view A -> ``(uv_b [N, 2], status [N] str)``; ``uv_b`` is NaN
     where the status is ``off_surface`` or ``outside`` (``hidden`` points keep their projection)."""
     uv_a = np.asarray(uv_a, np.float64).reshape(-1, 2)
-    z_a = _sample_nearest(depth_a, uv_a)
+    z_a = sample_nearest(depth_a, uv_a)
     status = np.full(len(uv_a), "mapped", dtype=object)
     status[~np.isfinite(z_a)] = "off_surface"
     uv_b = np.full_like(uv_a, np.nan)
@@ -60,7 +51,7 @@ def transfer_points(uv_a: np.ndarray, depth_a: np.ndarray, camera_a: Camera, dep
         h, w = depth_b.shape
         inside = (np.isfinite(projected).all(1) & (projected[:, 0] > -0.5) & (projected[:, 0] < w - 0.5)
                   & (projected[:, 1] > -0.5) & (projected[:, 1] < h - 0.5) & (z_b > 0))
-        seen = _sample_nearest(depth_b, np.where(inside[:, None], projected, np.nan))
+        seen = sample_nearest(depth_b, np.where(inside[:, None], projected, np.nan))
         tol = surface_tolerance(depth_b) if tolerance is None else tolerance
         hidden = inside & np.isfinite(seen) & (seen < z_b - tol)
         index = np.flatnonzero(lifted)
@@ -81,7 +72,7 @@ def warp_image(image_a: np.ndarray, depth_a: np.ndarray, camera_a: Camera, depth
     map_uv = np.full((h * w, 2), -1.0, np.float32)
     if valid.any():
         uv_a, z_a = camera_a.project(camera_b.unproject(grid[valid], z_b[valid]))
-        seen = _sample_nearest(depth_a, uv_a)
+        seen = sample_nearest(depth_a, uv_a)
         tol = surface_tolerance(depth_a) if tolerance is None else tolerance
         visible = np.isfinite(seen) & (np.abs(seen - z_a) <= tol)
         index = np.flatnonzero(valid)

@@ -40,10 +40,10 @@ COLUMNS = ("name", "status", "reason", "pixels", "coverage", "mae_scale_shift", 
 
 @dataclass(frozen=True)
 class DepthCase:
-    """One reconstruction to score: image files (PolyU) or a capture folder, and its truth."""
+    """One reconstruction to score: an image (PolyU) or a capture folder, and its truth."""
 
     name: str
-    inputs: tuple[str, ...]  # one image, or one capture folder
+    source: str  # one image, or one capture folder
     truth: str | None  # the .mat file (PolyU), None for a capture folder (its depth/)
 
 
@@ -88,7 +88,7 @@ def polyu_cases(inputs: list[Path], truth: Path) -> tuple[list[DepthCase], list[
     if not mats:
         raise InputError(f"{truth}: holds no .mat files")
     pairs, lonely_images, lonely_truths = pair_by_name(images, mats)
-    return [DepthCase(image.stem, (str(image),), str(mat)) for image, mat in pairs], lonely_images, lonely_truths
+    return [DepthCase(image.stem, str(image), str(mat)) for image, mat in pairs], lonely_images, lonely_truths
 
 
 def capture_cases(inputs: list[Path]) -> list[DepthCase]:
@@ -99,7 +99,7 @@ def capture_cases(inputs: list[Path]) -> list[DepthCase]:
     for path in inputs:
         if not is_capture_folder(path):
             raise InputError(f"{path}: not a capture folder (give --truth FOLDER for images with .mat height maps)")
-        cases.append(DepthCase(path.name, (str(path),), None))
+        cases.append(DepthCase(path.name, str(path), None))
     return cases
 
 
@@ -111,7 +111,7 @@ def _truths(case: DepthCase, capture) -> list[tuple[str, np.ndarray, np.ndarray 
         return [(case.name, depth_from_height(read_height_map(case.truth)), None)]
     views = [(f"{case.name}/{v.name}", v.depth, v.mask) for v in capture.views if v.depth is not None]
     if not views:
-        raise InputError(f"{case.inputs[0]}: the capture holds no ground-truth depth (depth/)")
+        raise InputError(f"{case.source}: the capture holds no ground-truth depth (depth/)")
     return views
 
 
@@ -151,9 +151,9 @@ def _evaluate(case: DepthCase, config, maps: Path) -> list[dict]:
     from ..io.datasets import load_any
     from ..pipeline import fuse
 
-    captures = load_any(list(case.inputs) if len(case.inputs) > 1 else case.inputs[0])
+    captures = load_any(case.source)
     if len(captures) != 1:
-        raise InputError(f"{case.inputs[0]}: holds {len(captures)} captures, not one")
+        raise InputError(f"{case.source}: holds {len(captures)} captures, not one")
     capture = captures[0]
     truths = _truths(case, capture)
     result = fuse(capture, config)

@@ -78,7 +78,7 @@ def prepare(order, means2d, conics, opacities, boxes, feats):
         for cx in (boxes[g, 0], boxes[g, 2]):
             for cy in (boxes[g, 1], boxes[g, 3]):
                 dx, dy = cx - mx, cy - my
-                q = dx * (a * dx + 2.0 * b * dy) + c * dy * dy
+                q = _quadratic(mx, my, a, b, c, cx, cy)
                 step_x = a * (2.0 * dx + 1.0) + 2.0 * b * dy
                 step_y = c * (2.0 * dy + 1.0) + 2.0 * b * dx
                 largest = max(largest, abs(q), abs(step_x), abs(step_y), abs(a), abs(b), abs(c))
@@ -94,9 +94,21 @@ def prepare(order, means2d, conics, opacities, boxes, feats):
 
 
 @njit(cache=True, inline="always")
-def _unpack(rec):
+def _load_pair(rec, feat, tx0, ty0, tx1, ty1):
+    """A tile pair's record: ``(mx, my, a, b, c, o, exp(-a), exp(-b), exp(-c), x0, y0, x1, y1)`` with
+    the Gaussian's pixel box clipped to the tile ``[tx0, tx1] x [ty0, ty1]``; its features into ``feat``."""
+    for f in range(feat.shape[0]):
+        feat[f] = rec[FEATS + f]
     return (float(rec[MX]), float(rec[MY]), float(rec[A]), float(rec[B]), float(rec[C]), float(rec[O]),
-            float(rec[EA]), float(rec[EB]), float(rec[EC]), int(rec[X0]), int(rec[Y0]), int(rec[X1]), int(rec[Y1]))
+            float(rec[EA]), float(rec[EB]), float(rec[EC]), max(tx0, int(rec[X0])), max(ty0, int(rec[Y0])),
+            min(tx1, int(rec[X1])), min(ty1, int(rec[Y1])))
+
+
+@njit(cache=True, inline="always")
+def _quadratic(mx: float, my: float, a: float, b: float, c: float, x: int, y: int) -> float:
+    """q = d^T conic d at pixel (x, y), d = pixel - mean."""
+    dx, dy = x - mx, y - my
+    return dx * (a * dx + 2.0 * b * dy) + c * dy * dy
 
 
 @njit(cache=True, inline="always")
@@ -107,8 +119,7 @@ def _falloff_start(mx: float, my: float, a: float, b: float, c: float, x: int, y
     ratio_y *= exp(-c), and the row's first ratio_x *= exp(-b): three exps per (tile, Gaussian)
     pair instead of one per pixel, exact up to float64 rounding over a tile's 16 + 16 steps."""
     dx, dy = x - mx, y - my
-    q = dx * (a * dx + 2.0 * b * dy) + c * dy * dy
-    return (math.exp(-0.5 * max(q, 0.0)), math.exp(-0.5 * (a * (2.0 * dx + 1.0) + 2.0 * b * dy)),
+    return (math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0)), math.exp(-0.5 * (a * (2.0 * dx + 1.0) + 2.0 * b * dy)),
             math.exp(-0.5 * (c * (2.0 * dy + 1.0) + 2.0 * b * dx)))
 
 
@@ -233,19 +244,14 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
             used[:] = end - first  # a pixel that never stops walks the whole list
             alive = (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
             for j in range(first, end):
-                rec = pairs[j]
-                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _unpack(rec)
-                for f in range(n_feats):
-                    feat[f] = rec[FEATS + f]
-                bx0, by0, bx1, by1 = max(tx0, bx0), max(ty0, by0), min(tx1, bx1), min(ty1, by1)
+                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _load_pair(pairs[j], feat, tx0, ty0, tx1, ty1)
                 row_falloff, row_ratio, ratio_y = _falloff_start(mx, my, a, b, c, bx0, by0)
                 for y in range(by0, by1 + 1):
                     falloff, ratio = row_falloff, row_ratio
                     py = y - ty0
                     for x in range(bx0, bx1 + 1):
                         if ea == 0.0:  # outside the incremental range: one exp per pixel
-                            dx, dy = x - mx, y - my
-                            falloff = math.exp(-0.5 * max(dx * (a * dx + 2.0 * b * dy) + c * dy * dy, 0.0))
+                            falloff = math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0))
                         raw = o * falloff
                         falloff *= ratio
                         ratio *= ea
@@ -306,12 +312,9 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
                         behind[py, px, f] = 0.0
                         upstream[py, px, f] = grad_image[y, x, f]
             for k in range(deepest - 1, -1, -1):
-                rec = pairs[first + k]
                 local = pair_grads[first + k]
-                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _unpack(rec)
-                for f in range(n_feats):
-                    feat[f] = rec[FEATS + f]
-                bx0, by0, bx1, by1 = max(tx0, bx0), max(ty0, by0), min(tx1, bx1), min(ty1, by1)
+                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _load_pair(pairs[first + k], feat, tx0, ty0,
+                                                                                tx1, ty1)
                 row_falloff, row_ratio, ratio_y = _falloff_start(mx, my, a, b, c, bx0, by0)
                 for y in range(by0, by1 + 1):
                     falloff, ratio = row_falloff, row_ratio
@@ -323,7 +326,7 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
                     for x in range(bx0, bx1 + 1):
                         dx = x - mx
                         if ea == 0.0:  # outside the incremental range: one exp per pixel
-                            falloff = math.exp(-0.5 * max(dx * (a * dx + 2.0 * b * dy) + c * dy * dy, 0.0))
+                            falloff = math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0))
                         here_falloff = falloff
                         falloff *= ratio
                         ratio *= ea
@@ -345,7 +348,7 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
                         if raw >= ALPHA_MAX:  # clamped: alpha does not depend on the parameters
                             continue
                         local[5] += grad_alpha * here_falloff
-                        if dx * (a * dx + 2.0 * b * dy) + c * dy * dy <= 0.0:  # q clamped at 0 (rounding only)
+                        if _quadratic(mx, my, a, b, c, x, y) <= 0.0:  # q clamped at 0 (rounding only)
                             continue
                         grad_q = -0.5 * grad_alpha * raw
                         local[0] -= 2.0 * grad_q * (a * dx + b * dy)

@@ -58,6 +58,32 @@ def _axes(camera, quats, scales, g, m, rq):
                 * float(scales[g, j])
 
 
+@njit(cache=True, inline="always")
+def _camera_point(camera, means, g, p):
+    """Gaussian ``g``'s centre in the camera frame, into ``p``: R m + t."""
+    for i in range(3):
+        p[i] = (camera[3 * i] * float(means[g, 0]) + camera[3 * i + 1] * float(means[g, 1])
+                + camera[3 * i + 2] * float(means[g, 2]) + camera[9 + i])
+
+
+@njit(cache=True, inline="always")
+def _screen_covariance(camera, quats, scales, g, z, tx, ty, low_pass, m, rq, t0, t1):
+    """The 2D covariance ``(a, b, c)`` and its determinant (Cauchy-Binet, not clamped) of Gaussian
+    ``g`` at depth ``z`` with the clamped tangents ``tx, ty``; fills ``m``, ``rq`` (:func:`_axes`)
+    and the Jacobian rows ``t0 = (fx/z)(M0 - tx M2)``, ``t1 = (fy/z)(M1 - ty M2)``."""
+    fx, fy = camera[12], camera[13]
+    _axes(camera, quats, scales, g, m, rq)
+    for j in range(3):
+        t0[j] = fx / z * (m[0, j] - tx * m[2, j])
+        t1[j] = fy / z * (m[1, j] - ty * m[2, j])
+    a = t0[0] * t0[0] + t0[1] * t0[1] + t0[2] * t0[2] + low_pass
+    b = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
+    c = t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2] + low_pass
+    m01, m02 = t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[2] - t0[2] * t1[0]
+    m12 = t0[1] * t1[2] - t0[2] * t1[1]
+    return a, b, c, m01 * m01 + m02 * m02 + m12 * m12 + low_pass * (a + c - low_pass)  # det = a c - b^2
+
+
 @njit(cache=True, parallel=True)
 def project_forward(means, quats, scales, opacities, camera, width, height, near, low_pass):
     """``camera`` [16] float64: R (row-major 9), t (3), fx, fy, cx, cy. Returns float64 ``means2d
@@ -83,9 +109,7 @@ def _project_one(means, quats, scales, opacities, camera, width, height, near, l
                  lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, means2d, conics, cov2d, depths, radii, valid, boxes):
     """Gaussian ``g`` of :func:`project_forward` (scratch arrays p, t0, t1, m, rq)."""
     fx, fy, cx, cy = camera[12], camera[13], camera[14], camera[15]
-    for i in range(3):
-        p[i] = (camera[3 * i] * float(means[g, 0]) + camera[3 * i + 1] * float(means[g, 1])
-                + camera[3 * i + 2] * float(means[g, 2]) + camera[9 + i])
+    _camera_point(camera, means, g, p)
     depths[g] = p[2]
     if not (p[2] >= near and math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
         return
@@ -93,16 +117,8 @@ def _project_one(means, quats, scales, opacities, camera, width, height, near, l
     u, v = fx * p[0] / z + cx, fy * p[1] / z + cy
     tx = max(min(p[0] / z, lim_x_pos), -lim_x_neg)
     ty = max(min(p[1] / z, lim_y_pos), -lim_y_neg)
-    _axes(camera, quats, scales, g, m, rq)
-    for j in range(3):
-        t0[j] = fx / z * (m[0, j] - tx * m[2, j])
-        t1[j] = fy / z * (m[1, j] - ty * m[2, j])
-    a = t0[0] * t0[0] + t0[1] * t0[1] + t0[2] * t0[2] + low_pass
-    b = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
-    c = t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2] + low_pass
-    m01, m02 = t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[2] - t0[2] * t1[0]
-    m12 = t0[1] * t1[2] - t0[2] * t1[1]
-    det = max(m01 * m01 + m02 * m02 + m12 * m12 + low_pass * (a + c - low_pass), 1e-300)
+    a, b, c, det = _screen_covariance(camera, quats, scales, g, z, tx, ty, low_pass, m, rq, t0, t1)
+    det = max(det, 1e-300)
     # Footprint box (project.footprint_boxes, opacities given).
     o = float(opacities[g])
     ratio = o / ALPHA_MIN
@@ -147,24 +163,13 @@ def project_backward(means, quats, scales, camera, width, height, low_pass, vali
         t0, t1, g_t0, g_t1 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
         g_m, g_rq, m, rq = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
         for g in range(chunk * n // chunks, (chunk + 1) * n // chunks):
-            for i in range(3):
-                p[i] = (camera[3 * i] * float(means[g, 0]) + camera[3 * i + 1] * float(means[g, 1])
-                        + camera[3 * i + 2] * float(means[g, 2]) + camera[9 + i])
+            _camera_point(camera, means, g, p)
             g_p[0], g_p[1], g_p[2] = 0.0, 0.0, float(grad_depths[g])
             if valid[g]:
                 z = p[2]
                 xz, yz = p[0] / z, p[1] / z
                 tx, ty = max(min(xz, lim_x_pos), -lim_x_neg), max(min(yz, lim_y_pos), -lim_y_neg)
-                _axes(camera, quats, scales, g, m, rq)
-                for j in range(3):
-                    t0[j] = fx / z * (m[0, j] - tx * m[2, j])
-                    t1[j] = fy / z * (m[1, j] - ty * m[2, j])
-                a = t0[0] * t0[0] + t0[1] * t0[1] + t0[2] * t0[2] + low_pass
-                b = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
-                c = t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2] + low_pass
-                m01, m02 = t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[2] - t0[2] * t1[0]
-                m12 = t0[1] * t1[2] - t0[2] * t1[1]
-                det = m01 * m01 + m02 * m02 + m12 * m12 + low_pass * (a + c - low_pass)  # = a c - b^2
+                a, b, c, det = _screen_covariance(camera, quats, scales, g, z, tx, ty, low_pass, m, rq, t0, t1)
                 # conic = (c, -b, a) / det with det = a c - b^2 (clamped at 1e-300: no gradient there).
                 gA, gB, gC = float(grad_conics[g, 0]), float(grad_conics[g, 1]), float(grad_conics[g, 2])
                 g_det = -(gA * c - gB * b + gC * a) / (det * det) if det > 1e-300 else 0.0

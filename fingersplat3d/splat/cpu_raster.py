@@ -15,15 +15,16 @@ from torch import Tensor
 from torch.autograd.function import once_differentiable
 
 from ..device import cpu_threads
-from .cpu_project import project_backward, project_forward
-from .project import Projection
 from .cpu_composite import TILE, bin_tiles, composite_backward, composite_forward, gather_pairs, prepare, reduce_pairs
+from .cpu_project import project_backward, project_forward
+from .project import Projection, near_in_dtype
 
 __all__ = ["composite_cpu", "kernel_threads", "project_cpu"]
 
 # OpenMP first (torch uses it too), then numba's own pool; TBB only when nothing else loads (an old
 # libtbb on the path would otherwise be tried first and rejected with a warning).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+
 
 def kernel_threads() -> int:
     """Threads for the kernels: :func:`cpu_threads`, capped at numba's pool size."""
@@ -139,7 +140,7 @@ class _ProjectCPU(torch.autograd.Function):
 def project_cpu(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, world_to_cam: Tensor, K: Tensor,
                 width: int, height: int, near: float, low_pass: float) -> tuple[Projection, Tensor]:
     """:func:`.project._project` on the CPU kernels (opacities given): ``(Projection, boxes [N, 4])``."""
-    near = float(torch.tensor(near, dtype=means.dtype))  # "on the near plane" means equal in the input dtype
+    near = near_in_dtype(near, means.dtype)
     means2d, conics, cov2d, depths, radii, valid, boxes = _ProjectCPU.apply(
         means, quats, scales, opacities, world_to_cam, K, int(width), int(height), near, float(low_pass))
     return Projection(means2d, cov2d, conics, depths, radii, valid), boxes

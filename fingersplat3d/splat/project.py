@@ -62,11 +62,16 @@ def _check(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor, K
         raise ValueError(f"low_pass must be non-negative, got {low_pass}")
 
 
+def near_in_dtype(near: float, dtype: torch.dtype) -> float:
+    """``near`` rounded to ``dtype``: "on the near plane" means equal in the input dtype."""
+    return float(torch.tensor(near, dtype=dtype))
+
+
 def _project(means: Tensor, quats: Tensor, scales: Tensor, world_to_cam: Tensor, K: Tensor,
              width: int, height: int, near: float, low_pass: float, opacities: Tensor | None,
              compiled: bool = False) -> tuple[Projection, Tensor]:
     """The projection plus the integer footprint boxes ``[N, 4]`` the binning needs."""
-    near = float(torch.tensor(near, dtype=means.dtype))  # "on the near plane" means equal in the input dtype
+    near = near_in_dtype(near, means.dtype)
     core = _compiled_core() if compiled else _project_core
     *fields, boxes = core(means, quats, scales, world_to_cam, K, width, height, near, low_pass, opacities)
     return Projection(*fields), boxes

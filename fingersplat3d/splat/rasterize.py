@@ -24,8 +24,9 @@ __all__ = ["BACKENDS", "RenderOutput", "rasterize", "resolve_backend"]
 
 BACKENDS = ("auto", "numba", "torch")
 MIN_TRANSMITTANCE = 1e-4
-"""Early termination of the ``numba`` backend (3DGS, gsplat): a pixel stops before the Gaussian that
-would bring its transmittance below this, so what it leaves out weighs at most 1e-4 of a feature."""
+"""Early termination of the ``numba`` backend: a pixel stops after the Gaussian that brings its
+transmittance below this (3DGS and gsplat stop before it), so what it leaves out weighs less than
+1e-4 of a feature."""
 ALPHA_FOR_DEPTH = 1e-6
 """Expected depth is ``sum(w z) / alpha`` only where alpha exceeds this; 0 elsewhere."""
 
@@ -101,23 +102,19 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
         raise ValueError(f"tile_size must be a positive integer, got {tile_size}")
     backend = resolve_backend(backend, means.device)
     width, height = int(width), int(height)
+    channels = colors.shape[1]
     if backend == "numba":
-        from .cpu_raster import project_cpu
+        from .cpu_raster import composite_cpu, project_cpu
 
         projection, boxes = project_cpu(means, quats, scales, opacities, world_to_cam, K, width, height, float(near),
                                         float(low_pass))
-    else:
-        projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
-                                     float(low_pass), opacities, compiled)
-    channels = colors.shape[1]
-    if backend == "numba":
-        from .cpu_raster import composite_cpu
-
         feats = torch.cat([colors, projection.depths[:, None]], 1)  # [N, C + 1]; alpha is 1 - final transmittance
         image, alpha = composite_cpu(projection.means2d, projection.conics, opacities, feats, boxes, projection.valid,
                                      projection.depths, width, height, min_transmittance)
         color, depth = finish_render(image[..., :channels], alpha, image[..., channels], background)
         return RenderOutput(color, alpha, depth, projection.means2d, projection.radii, projection.depths)
+    projection, boxes = _project(means, quats, scales, world_to_cam, K, width, height, float(near),
+                                 float(low_pass), opacities, compiled)
     feats = torch.cat([colors, torch.ones_like(colors[:, :1]), projection.depths[:, None]], 1)  # [N, C + 2]
     bins = bin_gaussians(boxes, projection.valid, projection.depths, width, height, tile_size)
     kernels = EAGER_KERNELS
