@@ -434,8 +434,8 @@ def _run_register(args: argparse.Namespace) -> int:
 
 
 def _add_eval(commands) -> None:
-    """``fs3d eval depth``: its arguments."""
-    evaluate = commands.add_parser("eval", help="the paper's experiments: depth error against ground truth",
+    """``fs3d eval depth|match|register|quality``: their arguments."""
+    evaluate = commands.add_parser("eval", help="the paper's experiments: depth error, matching, view registration, image quality",
                                    description="Evaluate reconstructions against ground truth.")
     actions = evaluate.add_subparsers(dest="action", metavar="ACTION", required=True)
     depth = actions.add_parser(
@@ -450,6 +450,87 @@ def _add_eval(commands) -> None:
     depth.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
     depth.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     depth.set_defaults(run=_run_eval_depth)
+    _add_eval_match(actions)
+
+
+def _add_eval_match(actions) -> None:
+    from .experiments.match import DEFAULT_ANGLES, UWA_NAMING
+
+    match = actions.add_parser(
+        "match", help="mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET",
+        description="Make a contact-like print (8-bit gray, ridges dark, ~500 ppi, tip up) of every photo, find its "
+                    "minutiae (mindtct) and NFIQ2, and score every two photos of different captures seen by the same "
+                    "camera with bozorth3: genuine when the finger is the same (read from the file names), impostor "
+                    "otherwise. With --reconstructions, each model is rendered at --angles about its rig axis and "
+                    "compared with the real photos of the finger's other captures (and of other fingers). Writes "
+                    "scores.csv, prints.csv, prints/, summary.md (EER, FNMR at FMR 1 %% and 0.01 %%, FMR_zero, "
+                    "scores by angle) and det.png.")
+    match.add_argument("inputs", nargs="+", type=Path, help="photos, or folders of photos")
+    match.add_argument("--reconstructions", nargs="+", type=Path, default=[], metavar="REC",
+                       help="reconstruction folders from 'fs3d fuse' (with their Gaussians) to synthesize views from")
+    match.add_argument("--naming", default=UWA_NAMING,
+                       help="regular expression on file stems with named groups 'capture' and 'finger' (or "
+                            "'subject' and 'hand'), optional 'view' and 'session'; default: the UWA 3D/2D naming "
+                            "subject_finger_capture_session_frame")
+    match.add_argument("--views", help="comma-separated view labels to use (e.g. 0,1,2: UWA's plain-light frames)")
+    match.add_argument("--angles", type=_angle_list, default=DEFAULT_ANGLES,
+                       help="render angles in degrees about the rig axis, comma-separated, as --angles=-30,0,30 (default "
+                            f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
+    match.add_argument("--ridges", choices=("bright", "dark"), default="bright",
+                       help="how ridge crests look in the photos (default bright: contactless rigs' plain light)")
+    match.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
+    match.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    match.set_defaults(run=_run_eval_match)
+
+
+def _angle_list(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give angles in degrees separated by commas, e.g. -30,0,30") from None
+    if not values or not all(abs(v) < 180 for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: give angles between -180 and 180 degrees")
+    return values
+
+
+def _nbis_needed(command: str) -> None:
+    from .eval.fingerprint import nbis_available
+
+    if not nbis_available():
+        raise InputError(f"'{command}' needs NIST's tools from the nbis-py package: pip install nbis-py==0.1.3")
+
+
+def _run_eval_match(args: argparse.Namespace) -> int:
+    from .experiments.match import parse_samples, run_match_evaluation
+    from .io.images import find_files
+
+    _nbis_needed("fs3d eval match")
+    check_free(args.output, args.overwrite)
+    views = {v.strip() for v in args.views.split(",") if v.strip()} if args.views else None
+    samples, unparsed = parse_samples(find_files(args.inputs), args.naming, views)
+    for path in unparsed:
+        print(f"fs3d eval match: {path.name} does not follow the naming pattern; skipped", file=sys.stderr)
+    if len({s.capture for s in samples}) < 2:
+        raise InputError(f"{len(samples)} photos from {len({s.capture for s in samples})} capture(s): matching needs "
+                         "photos of at least two captures, named so that the finger and capture can be read")
+    for folder in args.reconstructions:
+        if not (folder / "cameras.json").is_file():
+            raise InputError(f"{folder}: not a reconstruction folder (no cameras.json; make one with 'fs3d fuse')")
+    with atomic_dir(args.output, overwrite=args.overwrite) as folder:
+        summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
+                                       naming=args.naming, ridges=args.ridges)
+    for protocol, rates in summary["protocols"].items():
+        eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
+        print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")
+    print(f"wrote {args.output}")
+    if not summary["protocols"]:
+        print("fs3d eval match: no two prints could be compared (see summary.md)", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    if summary["failed"]:
+        print(f"fs3d eval match: {len(summary['failed'])} of {summary['prints']} photos or renders gave no print "
+              f"(see {args.output / 'summary.md'})", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _run_eval_depth(args: argparse.Namespace) -> int:

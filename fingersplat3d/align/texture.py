@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["as_gray", "estimate_ridge_period", "suppress_glints", "ridge_texture", "DEFAULT_PERIOD_PX"]
+__all__ = ["as_gray", "estimate_ridge_period", "ridge_area", "suppress_glints", "ridge_texture", "DEFAULT_PERIOD_PX"]
 
 DEFAULT_PERIOD_PX = 8.0
 """Period returned when no ridge peak stands out (a featureless image)."""
@@ -65,7 +65,7 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
     rows, cols = np.nonzero(mask)
     if rows.size == 0:
         return DEFAULT_PERIOD_PX
-    mask = _ridge_area(mask)
+    mask = ridge_area(mask)
     extent = min(int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1)
     margin = int(min(max_period, 0.1 * extent))  # off the silhouette's edge, where shading drops
     inner = mask if mask.all() or margin < 1 else cv2.erode(mask.astype(np.uint8), np.ones((2 * margin + 1,) * 2, np.uint8)) > 0
@@ -88,10 +88,13 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
                 continue
             patch = high_pass[top:top + tile, left:left + tile]
             power = np.abs(np.fft.fftshift(np.fft.fft2((patch - patch.mean()) * window, (_FFT, _FFT)))) ** 2
-            in_band = np.where(band, power, 0.0)
+            in_band = np.where(band, power * radius, 0.0)  # whitened: shading's 1/f falloff does not outvote ridges
             y, x = np.unravel_index(int(np.argmax(in_band)), power.shape)
-            contrast = in_band[y, x] / max(float(power[band].mean()), 1e-30)
-            if contrast < _MIN_PEAK_CONTRAST or not (0 < y < _FFT - 1 and 0 < x < _FFT - 1):
+            contrast = in_band[y, x] / max(float(in_band[band].mean()), 1e-30)
+            if contrast < _MIN_PEAK_CONTRAST:
+                continue
+            y, x = _climb(power, y, x)  # the peak itself, on the unweighted spectrum
+            if not (0 < y < _FFT - 1 and 0 < x < _FFT - 1):
                 continue
             fy = y + _parabola(power[y - 1, x], power[y, x], power[y + 1, x])
             fx = x + _parabola(power[y, x - 1], power[y, x], power[y, x + 1])
@@ -104,7 +107,7 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
     return float(np.asarray(periods)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
-def _ridge_area(mask: np.ndarray) -> np.ndarray:
+def ridge_area(mask: np.ndarray) -> np.ndarray:
     """The part of a finger mask where ridges are: within ``RIDGE_AREA_WIDTHS`` finger widths of the tip.
 
     Friction ridges cover the distal phalanx up to its crease, ~1.4-1.8 widths from the tip;
@@ -124,6 +127,18 @@ def _ridge_area(mask: np.ndarray) -> np.ndarray:
     area = np.zeros_like(mask)
     area[rows, cols] = (frame.s_tip - s) < RIDGE_AREA_WIDTHS * width
     return area
+
+
+def _climb(power: np.ndarray, y: int, x: int, steps: int = 4) -> tuple[int, int]:
+    """From ``(y, x)`` uphill on ``power`` to a local maximum (at most ``steps`` moves)."""
+    for _ in range(steps):
+        window = power[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2]
+        dy, dx = np.unravel_index(int(np.argmax(window)), window.shape)
+        ny, nx = max(y - 1, 0) + int(dy), max(x - 1, 0) + int(dx)
+        if (ny, nx) == (y, x):
+            break
+        y, x = ny, nx
+    return y, x
 
 
 def _parabola(left: float, centre: float, right: float) -> float:

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import FS3DError, InputError
 from ..eval import depth_errors
 from ..io.depth import depth_colormap
-from ..io.images import IMAGE_SUFFIXES
+from ..io.images import IMAGE_SUFFIXES, find_files
 
 __all__ = ["DepthCase", "PAPER_FIGURES", "pair_by_name", "polyu_cases", "capture_cases", "run_depth_evaluation"]
 
@@ -65,24 +65,12 @@ def pair_by_name(images: list[Path], truths: list[Path]) -> tuple[list[tuple[Pat
             [truth_by[k] for k in sorted(truth_by) if k not in image_by])
 
 
-def _files(paths: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
-    found = []
-    for path in paths:
-        if path.is_dir():
-            found += sorted(p for p in path.rglob("*") if p.suffix.lower() in suffixes)
-        elif path.suffix.lower() in suffixes:
-            found.append(path)
-        elif not path.exists():
-            raise InputError(f"{path}: not found")
-    return found
-
-
 def polyu_cases(inputs: list[Path], truth: Path) -> tuple[list[DepthCase], list[Path], list[Path]]:
     """Cases from images (files or folders) and a folder of ``.mat`` height maps."""
     if not truth.is_dir():
         raise InputError(f"{truth}: the ground-truth folder does not exist")
-    images = _files(inputs, IMAGE_SUFFIXES)
-    mats = _files([truth], (".mat",))
+    images = find_files(inputs, IMAGE_SUFFIXES)
+    mats = find_files([truth], (".mat",))
     if not images:
         raise InputError(f"no images found in {', '.join(map(str, inputs))}")
     if not mats:

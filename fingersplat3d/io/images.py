@@ -10,12 +10,26 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import input_error
+from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "read_image", "write_image", "read_mask", "write_mask"]
+__all__ = ["IMAGE_SUFFIXES", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+def find_files(paths: list[Path], suffixes: tuple[str, ...] = IMAGE_SUFFIXES) -> list[Path]:
+    """Files with one of ``suffixes`` (case-insensitive): those given, and those under given folders
+    (recursively, sorted). A path that does not exist is an ``InputError``."""
+    found = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            found += sorted(p for p in path.rglob("*") if p.suffix.lower() in suffixes)
+        elif path.suffix.lower() in suffixes:
+            found.append(path)
+        elif not path.exists():
+            raise InputError(f"{path}: not found")
+    return found
 
 
 def _read_raw(path: Path) -> np.ndarray:

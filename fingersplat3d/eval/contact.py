@@ -1,0 +1,117 @@
+"""A contactless finger photo made into what NIST's fingerprint tools expect of a contact print.
+
+NFIQ2 and mindtct are built for 500 ppi plain impressions: 8-bit gray, ridges dark on a white
+background, fingertip up, 197-799 px wide and 197-999 px tall after white borders are cropped.
+:func:`contact_like` converts a photo (or a render) and its finger mask:
+
+1. **Ridge area only**: the distal phalanx within ``RIDGE_AREA_WIDTHS`` finger widths of the tip
+   (:func:`~fingersplat3d.align.texture.ridge_area`); the rest of the finger and the background
+   become white.
+2. **Ridges dark**: the band-passed ridge texture (:func:`~fingersplat3d.align.texture.ridge_texture`,
+   unit local RMS, so shading and exposure drop out) mapped to ``128 -+ 48 * texture``. Under the
+   plain light of contactless rigs ridge crests are the bright lines (``ridges="bright"``, the
+   default, inverts them); ``"dark"`` keeps the photo's polarity.
+3. **~500 ppi**: scaled so the measured ridge period becomes ``TARGET_PERIOD_PX`` (9 px, the
+   ~0.46 mm inter-ridge distance of adult fingers at 500 ppi). Photos carry no scale, so the ridge
+   period stands in for it.
+4. **Upright and within NFIQ2's size limits**: rotated so the fingertip points up; a ridge area
+   still too large is cut to 799 x 999 px around its axis, keeping the tip end.
+
+The result keeps the affine map back to the photo's pixels, so minutiae found on the print can be
+drawn on, or carried from, the photo. Pure numpy/OpenCV.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..align.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
+from ..errors import InputError
+
+__all__ = ["ContactImage", "contact_like", "TARGET_PERIOD_PX", "MAX_SIZE", "MIN_SIDE"]
+
+TARGET_PERIOD_PX = 9.0
+MAX_SIZE = (799, 999)  # NFIQ2's largest width and height after white borders are cropped
+MIN_SIDE = 197  # NFIQ2's smallest width and height
+MARGIN = 8  # white pixels around the print (mindtct ignores a border of blocks)
+GRAY, SWING = 128.0, 48.0  # print level of the mean skin and of one local RMS of ridge texture
+
+
+@dataclass(frozen=True, eq=False)
+class ContactImage:
+    """An 8-bit contact-like print and the affine map from the photo's pixels to it."""
+
+    image: np.ndarray  # [h, w] uint8, ridges dark, background 255
+    affine: np.ndarray  # [2, 3] photo pixel (x, y) -> print pixel
+    period_px: float  # the photo's ridge period
+    ppi_scale: float  # print pixels per photo pixel
+
+    def to_print(self, xy: np.ndarray) -> np.ndarray:
+        """Photo pixels ``[N, 2]`` -> print pixels."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        return xy @ self.affine[:, :2].T + self.affine[:, 2]
+
+    def to_photo(self, xy: np.ndarray) -> np.ndarray:
+        """Print pixels ``[N, 2]`` -> photo pixels."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        return (xy - self.affine[:, 2]) @ np.linalg.inv(self.affine[:, :2]).T
+
+    @property
+    def fits_nfiq2(self) -> bool:
+        """Whether the print's ridge area is within NFIQ2's size limits."""
+        inked = self.image < 255
+        if not inked.any():
+            return False
+        rows, cols = np.nonzero(inked)
+        width, height = cols.max() - cols.min() + 1, rows.max() - rows.min() + 1
+        return MIN_SIDE <= width <= MAX_SIZE[0] and MIN_SIDE <= height <= MAX_SIZE[1]
+
+
+def contact_like(image: np.ndarray, mask: np.ndarray, *, ridges: str = "bright",
+                 period_px: float | None = None) -> ContactImage:
+    """The contact-like print of a finger photo (see the module docstring)."""
+    if ridges not in ("bright", "dark"):
+        raise InputError(f"ridges={ridges!r}: use 'bright' (crests are the bright lines) or 'dark'")
+    gray = as_gray(image)
+    mask = np.asarray(mask, bool)
+    if mask.shape != gray.shape:
+        raise InputError(f"the mask {mask.shape} does not match the image {gray.shape}")
+    if mask.sum() < 64:
+        raise InputError("the finger mask is empty: there is no finger to make a print of")
+    area = ridge_area(mask) & mask
+    period = float(period_px) if period_px is not None else estimate_ridge_period(gray, area)
+    texture = ridge_texture(gray, area, period)
+    sign = -1.0 if ridges == "bright" else 1.0
+    ink = np.clip(GRAY + sign * SWING * texture, 0.0, 254.0)
+    affine, size = _upright_affine(area, TARGET_PERIOD_PX / period)
+    printed = cv2.warpAffine(ink.astype(np.float32), affine, size, flags=cv2.INTER_AREA if period > TARGET_PERIOD_PX
+                             else cv2.INTER_LINEAR, borderValue=255.0)
+    inside = cv2.warpAffine(area.astype(np.float32), affine, size, flags=cv2.INTER_LINEAR, borderValue=0.0) > 0.5
+    printed = np.where(inside, np.rint(printed), 255).astype(np.uint8)
+    return ContactImage(printed, affine, period, TARGET_PERIOD_PX / period)
+
+
+def _upright_affine(area: np.ndarray, scale: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """The photo -> print map: scale, tip up, ridge area cropped to the limits; and the print size."""
+    from ..segment.silhouette import silhouette_frame
+
+    frame = silhouette_frame(area)
+    angle = np.arctan2(frame.axis[1], frame.axis[0])
+    turn = -0.5 * np.pi - angle  # the axis (toward the tip) becomes (0, -1): up
+    rotation = scale * np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    rows, cols = np.nonzero(area)
+    points = np.stack([cols, rows], 1).astype(np.float64) @ rotation.T
+    low, high = points.min(0), points.max(0)
+    centre_x = float((np.asarray(frame.origin) @ rotation.T)[0])
+    width_cap, height_cap = MAX_SIZE[0] - 2 * MARGIN, MAX_SIZE[1] - 2 * MARGIN
+    if high[0] - low[0] > width_cap:  # too wide: keep the middle around the axis
+        low[0] = centre_x - 0.5 * width_cap
+        high[0] = low[0] + width_cap
+    if high[1] - low[1] > height_cap:  # too tall: keep the tip end (the top)
+        high[1] = low[1] + height_cap
+    offset = MARGIN - low
+    affine = np.hstack([rotation, offset[:, None]])
+    size = (int(np.ceil(high[0] - low[0])) + 2 * MARGIN + 1, int(np.ceil(high[1] - low[1])) + 2 * MARGIN + 1)
+    return affine, size

@@ -1,0 +1,114 @@
+"""NIST's fingerprint tools on a contact-like print: mindtct minutiae, NFIQ2 quality, bozorth3 scores.
+
+The implementation is NIST's NBIS and NFIQ2 as packaged by ``nbis-py`` (pinned 0.1.3: newer
+``nbis-python`` releases need a newer glibc than common Linux machines have). Prints come from
+:func:`fingersplat3d.eval.contact.contact_like` (8-bit gray, ridges dark, ~500 ppi).
+
+* :func:`analyse`: minutiae (in the *photo's* pixels, through the print's affine map) and the NFIQ2
+  score. A print NFIQ2 cannot score (too small, no ridge flow) is a :class:`Fingerprint` with
+  ``nfiq2`` None and the reason in ``failure``; its minutiae are still extracted when mindtct can.
+* :func:`match_score`: the bozorth3 score of two fingerprints (0 when either has no minutiae).
+  bozorth3 scores are not normalised: above ~40 is the classic "probably the same finger".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import cv2
+import numpy as np
+
+from .contact import ContactImage
+
+__all__ = ["Fingerprint", "analyse", "match_score", "nbis_available"]
+
+
+@dataclass(frozen=True, eq=False)
+class Fingerprint:
+    """What NIST's tools found in one print."""
+
+    minutiae: np.ndarray  # [N, 4]: x, y (photo pixels), angle (degrees, photo frame), reliability in [0, 1]
+    kinds: tuple[str, ...]  # "ending" | "bifurcation" per minutia
+    nfiq2: float | None  # 0-100; None when NFIQ2 could not score the print
+    failure: str = ""  # why nfiq2 (or the minutiae) are missing; "" when all went well
+    template: Any = field(default=None, repr=False)  # nbis Minutiae, for bozorth3
+
+    @property
+    def count(self) -> int:
+        return len(self.minutiae)
+
+
+def nbis_available() -> bool:
+    """Whether ``nbis-py`` can be imported."""
+    try:
+        import nbis  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@lru_cache(maxsize=2)
+def _extractor(nfiq2: bool):
+    import nbis
+
+    settings = nbis.NbisExtractorSettings(min_quality=0.0, get_center=False, check_fingerprint=False,
+                                          compute_nfiq2=nfiq2, ppi=500.0)
+    return nbis.new_nbis_extractor(settings)
+
+
+def _reason(error: Exception) -> str:
+    text = str(error).strip() or type(error).__name__
+    return f"{type(error).__name__}: {text}" if type(error).__name__ not in text else text
+
+
+def analyse(contact: ContactImage, nfiq2: bool = True) -> Fingerprint:
+    """Minutiae and NFIQ2 of a print (see the module docstring)."""
+    import nbis
+
+    ok, png = cv2.imencode(".png", contact.image)
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
+        raise RuntimeError("could not encode the print as PNG")
+    data = png.tobytes()
+    failure, score, template = "", None, None
+    if nfiq2 and not contact.fits_nfiq2:
+        failure = "NFIQ2: the print's ridge area is outside 197-799 x 197-999 px"
+    elif nfiq2:
+        try:
+            template = _extractor(True).extract_minutiae(data)
+            score = float(template.quality().score)
+        except nbis.NbisError as error:
+            failure, template = f"NFIQ2: {_reason(error)}", None
+    if template is None:
+        try:
+            template = _extractor(False).extract_minutiae(data)
+        except nbis.NbisError as error:
+            reason = f"mindtct: {_reason(error)}"
+            return Fingerprint(np.zeros((0, 4)), (), None, f"{failure}; {reason}" if failure else reason)
+    found = template.get()
+    xy = np.array([[m.x(), m.y()] for m in found], np.float64).reshape(-1, 2)
+    angles = np.array([float(m.angle()) for m in found], np.float64)
+    photo_xy = contact.to_photo(xy)
+    photo_angles = _photo_angles(contact, angles)
+    reliability = np.array([float(m.reliability()) for m in found], np.float64)
+    kinds = tuple("bifurcation" if "BIF" in str(m.kind()).upper() else "ending" for m in found)
+    minutiae = np.column_stack([photo_xy, photo_angles, reliability]) if len(found) else np.zeros((0, 4))
+    return Fingerprint(minutiae, kinds, score, failure, template)
+
+
+def _photo_angles(contact: ContactImage, degrees: np.ndarray) -> np.ndarray:
+    """Minutia directions on the print (degrees, counter-clockwise from +x, y up as NBIS gives them)
+    -> the same directions in the photo's pixel frame (degrees, x right, y down, clockwise)."""
+    if degrees.size == 0:
+        return degrees
+    radians = np.deg2rad(degrees)
+    direction = np.stack([np.cos(radians), -np.sin(radians)], 1)  # print pixel frame (y down)
+    back = direction @ np.linalg.inv(contact.affine[:, :2]).T
+    return np.rad2deg(np.arctan2(back[:, 1], back[:, 0])) % 360.0
+
+
+def match_score(a: Fingerprint, b: Fingerprint) -> int:
+    """bozorth3's score of two fingerprints (0 when either has no minutiae)."""
+    if a.template is None or b.template is None or not a.count or not b.count:
+        return 0
+    return int(a.template.compare(b.template))

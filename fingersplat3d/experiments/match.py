@@ -1,0 +1,296 @@
+"""``fs3d eval match``: the paper's matching experiment (mindtct minutiae, bozorth3 scores) as a command.
+
+Samples are photos named so that the finger and the capture can be read from the name (by
+default the UWA 3D/2D naming ``{subject}_{finger}_{capture}_{session}_{frame}``: finger =
+subject_finger, capture = capture_session, view = frame). Two protocols:
+
+* **real**: every two photos of *different captures* seen by the same camera (view label);
+  genuine when the finger is the same, impostor otherwise.
+* **synthesized** (with reconstruction folders from ``fs3d fuse``): the model of one capture is
+  rendered at angles about the rig axis (0 = its middle camera) and each render compared with the
+  real photos of the gallery view (the middle camera's label) of every *other* capture: genuine
+  for the same finger, impostor for other fingers. Scores by angle give the paper's
+  angle-difference table.
+
+Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`) and goes
+through NIST's tools (:mod:`fingersplat3d.eval.fingerprint`). Error rates:
+:func:`fingersplat3d.eval.verification.error_rates`. Writes ``scores.csv``, ``prints.csv`` (per
+print: minutiae, NFIQ2, failure), ``prints/`` (the prints as PNG), ``summary.md`` and ``det.png``.
+"""
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import FS3DError, InputError
+
+__all__ = ["UWA_NAMING", "Sample", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
+
+UWA_NAMING = r"^(?P<subject>\d+)_(?P<hand>\d+)_(?P<capture>\d+)_(?P<session>\d+)_(?P<view>\d+)$"
+"""UWA 3D/2D: finger = subject + finger number, capture = capture + session, view = frame."""
+DEFAULT_ANGLES = (-30.0, -15.0, 0.0, 15.0, 30.0)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One photo and who it is of."""
+
+    path: str
+    finger: str
+    capture: str  # unique across fingers: finger/capture
+    view: str
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+
+def _identity(stem: str, pattern: re.Pattern) -> tuple[str, str, str] | None:
+    match = pattern.match(stem)
+    if match is None:
+        return None
+    groups = match.groupdict()
+    if "finger" in groups:
+        finger = groups["finger"]
+    else:
+        finger = f"{groups['subject']}_{groups['hand']}"
+    capture = groups["capture"] + (f"_{groups['session']}" if groups.get("session") else "")
+    return finger, f"{finger}/{capture}", groups.get("view") or ""
+
+
+def compile_naming(naming: str) -> re.Pattern:
+    """A naming regex with the groups it needs (``finger`` or ``subject`` + ``hand``, and ``capture``)."""
+    try:
+        pattern = re.compile(naming)
+    except re.error as error:
+        raise InputError(f"--naming {naming!r} is not a regular expression: {error}") from None
+    groups = set(pattern.groupindex)
+    if "capture" not in groups or not ("finger" in groups or {"subject", "hand"} <= groups):
+        raise InputError(f"--naming {naming!r} needs the named groups 'capture' and 'finger' "
+                         "(or 'subject' and 'hand'); 'view' and 'session' are optional")
+    return pattern
+
+
+def parse_samples(paths: list[Path], naming: str = UWA_NAMING, views: set[str] | None = None
+                  ) -> tuple[list[Sample], list[Path]]:
+    """Samples from image files (names parsed by ``naming``) and the files whose name did not parse."""
+    pattern = compile_naming(naming)
+    samples, unparsed = [], []
+    for path in paths:
+        identity = _identity(path.stem, pattern)
+        if identity is None:
+            unparsed.append(path)
+        elif views is None or identity[2] in views:
+            samples.append(Sample(str(path), *identity))
+    return samples, unparsed
+
+
+def real_pairs(samples: list[Sample]) -> list[tuple[int, int, bool]]:
+    """``(i, j, genuine)`` for every two samples of different captures and the same view."""
+    pairs = []
+    for i in range(len(samples)):
+        for j in range(i + 1, len(samples)):
+            a, b = samples[i], samples[j]
+            if a.capture != b.capture and a.view == b.view:
+                pairs.append((i, j, a.finger == b.finger))
+    return pairs
+
+
+@dataclass(frozen=True)
+class _Print:
+    name: str
+    fingerprint: object | None  # Fingerprint, None when no print could be made
+    failure: str
+
+
+def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str) -> _Print:
+    from ..eval.contact import contact_like
+    from ..eval.fingerprint import analyse
+    from ..segment.masks import finger_mask
+
+    try:
+        if mask is None:
+            mask = finger_mask(image, name=name)
+        contact = contact_like(image, mask, ridges=ridges)
+    except FS3DError as error:
+        return _Print(name, None, str(error))
+    cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), contact.image)
+    fingerprint = analyse(contact)
+    return _Print(name, fingerprint, fingerprint.failure)
+
+
+def _reconstruction_identity(folder: Path, pattern: re.Pattern):
+    from ..io.cameras import read_cameras
+
+    cameras = read_cameras(folder / "cameras.json")
+    identities = [_identity(Path(image).stem, pattern) for image in cameras.images.values()]
+    if not identities or any(i is None for i in identities):
+        raise InputError(f"{folder / 'cameras.json'}: its photos' names do not follow the naming pattern, so the "
+                         "finger and capture it shows are unknown")
+    return cameras, identities
+
+
+def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, prints: Path, ridges: str):
+    """Prints of a reconstruction rendered at ``angles``: ``(finger, capture, gallery view, [(angle, print)])``."""
+    from ..device import resolve_device
+    from ..io.gaussians_ply import read_gaussians_ply
+    from ..splat.camera_path import cameras_at_angles, rig_geometry
+    from ..splat.novel import render_views
+
+    if not (folder / "gaussians.ply").is_file():
+        raise InputError(f"{folder}: no gaussians.ply (a reconstruction folder from 'fs3d fuse' without --no-splat)")
+    cameras, identities = _reconstruction_identity(folder, pattern)
+    finger, capture = identities[0][0], identities[0][1]
+    inputs = list(cameras.cameras.values())
+    try:
+        rig = rig_geometry(inputs)
+        placed = cameras_at_angles(inputs, angles)
+    except ValueError as error:
+        raise InputError(f"{folder}: cannot place novel views: {error}") from None
+    middle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
+    reference = int(rig.order[int(np.argmin(np.abs(rig.angles_deg[rig.order] - middle)))])
+    gallery_view = identities[reference][2]
+    model = read_gaussians_ply(folder / "gaussians.ply").to(resolve_device("auto"))
+    results = []
+    for angle, view in zip(angles, render_views(model, [(f"{a:+.0f}", c) for a, c in zip(angles, placed)])):
+        name = f"{folder.name}@{angle:+.0f}deg"
+        results.append((angle, _print_of(name, view.image, view.alpha >= 0.5, prints, ridges)))
+    return finger, capture, gallery_view, results
+
+
+def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
+                         angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
+                         progress: bool = True) -> dict:
+    """Both protocols; writes the files named in the module docstring and returns the summary."""
+    from tqdm import tqdm
+
+    from ..eval.fingerprint import match_score
+    from ..io.images import read_image
+
+    pattern = compile_naming(naming)
+    prints = out / "prints"
+    prints.mkdir(parents=True, exist_ok=True)
+    real = []
+    for sample in tqdm(samples, desc="prints (photos)", unit="image", disable=not progress):
+        try:
+            image = read_image(sample.path)
+        except FS3DError as error:
+            real.append(_Print(sample.name, None, str(error)))
+            continue
+        real.append(_print_of(sample.name, image, None, prints, ridges))
+    synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
+                   for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
+    rows = []
+    for i, j, genuine in real_pairs(samples):
+        a, b = real[i].fingerprint, real[j].fingerprint
+        if a is not None and b is not None:
+            rows.append({"protocol": "real", "probe": samples[i].name, "gallery": samples[j].name,
+                         "genuine": int(genuine), "angle_deg": "", "score": match_score(a, b)})
+    for finger, capture, view, renders in synthesized:
+        for k, sample in enumerate(samples):
+            if sample.capture == capture or sample.view != view or real[k].fingerprint is None:
+                continue
+            for angle, render in renders:
+                if render.fingerprint is not None:
+                    rows.append({"protocol": "synthesized", "probe": render.name, "gallery": sample.name,
+                                 "genuine": int(sample.finger == finger), "angle_deg": angle,
+                                 "score": match_score(render.fingerprint, real[k].fingerprint)})
+    all_prints = real + [p for *_, renders in synthesized for _, p in renders]
+    _write_csv(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
+               [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
+                 "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
+                 "failure": p.failure} for p in all_prints])
+    _write_csv(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score"), rows)
+    summary = summarise(rows, all_prints)
+    (out / "summary.md").write_text(summary_markdown(summary))
+    curves = {}
+    from ..eval.verification import det_curve
+
+    for protocol, rates in summary["protocols"].items():
+        if rates.get("eer") is not None:
+            genuine, impostor = _split(rows, protocol)
+            _, fmr, fnmr = det_curve(genuine, impostor)
+            curves[f"{protocol} (EER {rates['eer']:.1%})"] = (fmr, fnmr)
+    if curves:
+        from .plots import det_picture
+
+        det_picture(out / "det.png", curves, "bozorth3 on mindtct minutiae")
+    return summary
+
+
+def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, columns)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _split(rows: list[dict], protocol: str, angle: float | None = None) -> tuple[list[int], list[int]]:
+    chosen = [r for r in rows if r["protocol"] == protocol and (angle is None or r["angle_deg"] == angle)]
+    return [r["score"] for r in chosen if r["genuine"]], [r["score"] for r in chosen if not r["genuine"]]
+
+
+def summarise(rows: list[dict], prints: list[_Print]) -> dict:
+    from ..eval.verification import error_rates
+
+    protocols = {}
+    for protocol in ("real", "synthesized"):
+        genuine, impostor = _split(rows, protocol)
+        if genuine and impostor:
+            protocols[protocol] = error_rates(genuine, impostor)
+        elif genuine or impostor:
+            protocols[protocol] = {"genuine": len(genuine), "impostor": len(impostor), "eer": None}
+    angles = []
+    for angle in sorted({r["angle_deg"] for r in rows if r["protocol"] == "synthesized"}):
+        genuine, impostor = _split(rows, "synthesized", angle)
+        entry = {"angle_deg": angle, "genuine": len(genuine), "impostor": len(impostor),
+                 "genuine_mean": float(np.mean(genuine)) if genuine else None,
+                 "genuine_median": float(np.median(genuine)) if genuine else None,
+                 "impostor_mean": float(np.mean(impostor)) if impostor else None}
+        if genuine and impostor:
+            from ..eval.verification import equal_error_rate
+
+            entry["eer"] = equal_error_rate(genuine, impostor)
+        angles.append(entry)
+    failed = [(p.name, p.failure) for p in prints if p.fingerprint is None]
+    nfiq2 = [p.fingerprint.nfiq2 for p in prints if p.fingerprint is not None and p.fingerprint.nfiq2 is not None]
+    return {"protocols": protocols, "angles": angles, "prints": len(prints), "failed": failed,
+            "nfiq2_failed": sum(1 for p in prints if p.fingerprint is not None and p.fingerprint.nfiq2 is None),
+            "nfiq2_mean": float(np.mean(nfiq2)) if nfiq2 else None}
+
+
+def _percent(value) -> str:
+    return "—" if value is None else f"{100 * value:.1f} %"
+
+
+def summary_markdown(summary: dict) -> str:
+    lines = ["# Matching (mindtct + bozorth3)", "",
+             f"{summary['prints']} prints; {len(summary['failed'])} could not be made, NFIQ2 failed on "
+             f"{summary['nfiq2_failed']}; mean NFIQ2 {summary['nfiq2_mean']:.1f}." if summary["nfiq2_mean"] is not None
+             else f"{summary['prints']} prints; {len(summary['failed'])} could not be made.", ""]
+    if summary["protocols"]:
+        lines += ["| protocol | genuine | impostor | EER | FNMR @ FMR 1 % | FNMR @ FMR 0.01 % | FMR_zero | FMR floor (1/impostors) |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for name, r in summary["protocols"].items():
+            lines.append(f"| {name} | {r['genuine']} | {r['impostor']} | {_percent(r.get('eer'))} | "
+                         f"{_percent(r.get('fnmr_at_fmr_1pct'))} | {_percent(r.get('fnmr_at_fmr_0.01pct'))} | "
+                         f"{_percent(r.get('fmr_zero'))} | {_percent(r.get('fmr_resolution'))} |")
+        lines += ["", "FNMR at an FMR below the floor cannot be told from FMR_zero with this many impostor scores."]
+    if summary["angles"]:
+        lines += ["", "Synthesized views against real photos of the finger's other captures, by the render's angle "
+                  "from the gallery camera:", "",
+                  "| angle ° | genuine | mean genuine score | median genuine | mean impostor score | EER |",
+                  "|---|---|---|---|---|---|"]
+        for a in summary["angles"]:
+            def number(v):
+                return "—" if v is None else f"{v:.1f}"
+            lines.append(f"| {a['angle_deg']:+.0f} | {a['genuine']} | {number(a['genuine_mean'])} | "
+                         f"{number(a['genuine_median'])} | {number(a['impostor_mean'])} | {_percent(a.get('eer'))} |")
+    if summary["failed"]:
+        lines += ["", "No print:", ""] + [f"- {name}: {why}" for name, why in summary["failed"]]
+    return "\n".join(lines) + "\n"

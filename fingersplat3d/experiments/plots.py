@@ -1,0 +1,64 @@
+"""The experiments' pictures: DET curves and time-vs-error trade curves (matplotlib, Agg, PNG)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["det_picture", "trade_picture"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def det_picture(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str) -> Path:
+    """DET curves (FNMR against FMR, log axes) for ``{label: (fmr, fnmr)}``; rates of 0 are drawn
+    at the plot's floor (half the smallest non-zero rate) so that steps to zero stay visible."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(figsize=(5.5, 5), dpi=120)
+    positive = [v[v > 0] for fmr, fnmr in curves.values() for v in (fmr, fnmr)]
+    floor = 0.5 * min((v.min() for v in positive if v.size), default=1e-3)
+    for label, (fmr, fnmr) in curves.items():
+        axes.step(np.maximum(fmr, floor), np.maximum(fnmr, floor), where="post", label=label)
+    axes.plot([floor, 1], [floor, 1], color="0.7", linestyle=":", linewidth=1, label="FMR = FNMR")
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.set_xlim(floor, 1.05)
+    axes.set_ylim(floor, 1.05)
+    axes.set_xlabel(f"false match rate (0 drawn at {floor:.1g})")
+    axes.set_ylabel("false non-match rate")
+    axes.set_title(title)
+    axes.grid(True, which="both", alpha=0.3)
+    axes.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path)
+    plt.close(figure)
+    return path
+
+
+def trade_picture(path: Path, curves: dict[str, list[tuple[float, float, str]]], x_label: str, y_label: str,
+                  title: str) -> Path:
+    """One curve per knob: ``{knob: [(time, error, setting label), ...]}``, points labelled."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(figsize=(7, 5), dpi=120)
+    for knob, points in curves.items():
+        points = sorted(points)
+        xs, ys = [p[0] for p in points], [p[1] for p in points]
+        axes.plot(xs, ys, marker="o", label=knob)
+        for x, y, label in points:
+            axes.annotate(label, (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7)
+    axes.set_xlabel(x_label)
+    axes.set_ylabel(y_label)
+    axes.set_title(title)
+    axes.grid(True, alpha=0.3)
+    axes.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path)
+    plt.close(figure)
+    return path

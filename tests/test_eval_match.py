@@ -1,0 +1,108 @@
+"""`fs3d eval match`: naming, pairs, both protocols end to end, bad input."""
+import csv
+
+import cv2
+import numpy as np
+import open3d as o3d
+import pytest
+
+from fingersplat3d.cli import main
+from fingersplat3d.errors import EXIT_INPUT
+from fingersplat3d.experiments.match import UWA_NAMING, parse_samples, real_pairs
+from fingersplat3d.io.cameras import write_cameras
+from fingersplat3d.io.gaussians_ply import write_gaussians_ply
+from fingersplat3d.io.images import write_image
+from fingersplat3d.splat.init import gaussians_from_cloud
+from fingersplat3d.synth import SynthConfig, synthesize
+
+pytest.importorskip("nbis")
+
+
+def test_uwa_names_give_finger_capture_and_view(tmp_path):
+    paths = [tmp_path / n for n in ("1_1_4_1_0.jpg", "1_1_4_1_1.jpg", "2_2_10_1_0.jpg", "1_1_7_1_0.jpg", "notes.png")]
+    samples, unparsed = parse_samples(paths, UWA_NAMING)
+    assert [(s.finger, s.capture, s.view) for s in samples] == [
+        ("1_1", "1_1/4_1", "0"), ("1_1", "1_1/4_1", "1"), ("2_2", "2_2/10_1", "0"), ("1_1", "1_1/7_1", "0")]
+    assert [p.name for p in unparsed] == ["notes.png"]
+    pairs = real_pairs(samples)  # different captures, same view only
+    assert sorted((samples[i].name, samples[j].name, g) for i, j, g in pairs) == [
+        ("1_1_4_1_0", "1_1_7_1_0", True), ("1_1_4_1_0", "2_2_10_1_0", False), ("2_2_10_1_0", "1_1_7_1_0", False)]
+    only_front, _ = parse_samples(paths, UWA_NAMING, views={"1"})
+    assert [s.name for s in only_front] == ["1_1_4_1_1"]
+
+
+def _moved(image: np.ndarray, degrees: float, shift: tuple[float, float]) -> np.ndarray:
+    h, w = image.shape[:2]
+    matrix = cv2.getRotationMatrix2D((w / 2, h / 2), degrees, 1.0)
+    matrix[:, 2] += shift
+    return cv2.warpAffine(image, matrix, (w, h), flags=cv2.INTER_LINEAR, borderValue=0.0)
+
+
+@pytest.fixture(scope="module")
+def match_data(tmp_path_factory, uwa640):
+    """Finger 1_1: capture 1 (uwa640) and capture 2 (the same photos turned and shifted); finger 2_2: another
+    synthetic finger; and a reconstruction of capture 1 built from its ground truth (cloud -> Gaussians)."""
+    root = tmp_path_factory.mktemp("match")
+    photos = root / "photos"
+    other = synthesize(4, SynthConfig(size=(640, 512))).capture
+    for k, view in enumerate(uwa640.views):
+        write_image(photos / f"1_1_1_1_{k}.png", view.image)
+        write_image(photos / f"1_1_2_1_{k}.png", _moved(view.image, 4.0, (12.0, -8.0)))
+        write_image(photos / f"2_2_1_1_{k}.png", other.views[k].image)
+    points, colours = [], []
+    for view in uwa640.views:
+        rows, cols = np.nonzero(view.mask & np.isfinite(view.depth))
+        uv = np.stack([cols, rows], 1).astype(np.float64)
+        points.append(view.camera.unproject(uv, view.depth[rows, cols]))
+        colours.append(np.repeat(np.atleast_2d(view.image[rows, cols]).reshape(len(rows), -1)[:, :1], 3, 1))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.concatenate(points)))
+    cloud.colors = o3d.utility.Vector3dVector(np.concatenate(colours).astype(np.float64))
+    cloud = cloud.voxel_down_sample(0.04)
+    rec = root / "rec_1_1_1_1"
+    rec.mkdir()
+    write_gaussians_ply(rec / "gaussians.ply", gaussians_from_cloud(cloud, 1, opacity=0.9))
+    write_cameras(rec / "cameras.json", [(v.name, f"1_1_1_1_{k}.png", v.camera) for k, v in enumerate(uwa640.views)])
+    return photos, rec
+
+
+def test_both_protocols_end_to_end(match_data, tmp_path, capsys):
+    photos, rec = match_data
+    (photos / "readme.png").write_bytes(b"")  # a name that does not parse: skipped, said
+    out = tmp_path / "out"
+    try:
+        code = main(["eval", "match", str(photos), "--reconstructions", str(rec), "--angles=-20,0,20", "-o", str(out)])
+    finally:
+        (photos / "readme.png").unlink()
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "readme.png does not follow the naming pattern" in captured.err
+    for name in ("scores.csv", "prints.csv", "summary.md", "det.png"):
+        assert (out / name).is_file()
+    assert len(list((out / "prints").glob("*.png"))) == 9 + 3
+    rows = list(csv.DictReader(open(out / "scores.csv")))
+    real = [r for r in rows if r["protocol"] == "real"]
+    assert len(real) == 3 * 3  # per view: (c1, c2) genuine, (c1, f2) and (c2, f2) impostor
+    genuine = [int(r["score"]) for r in real if r["genuine"] == "1"]
+    impostor = [int(r["score"]) for r in real if r["genuine"] == "0"]
+    assert min(genuine) > max(impostor)
+    synthesized = [r for r in rows if r["protocol"] == "synthesized"]
+    # the renders are compared with the gallery view (the middle camera: label 1) of the other captures
+    assert {r["gallery"] for r in synthesized} == {"1_1_2_1_1", "2_2_1_1_1"}
+    at_zero = {r["gallery"]: int(r["score"]) for r in synthesized if float(r["angle_deg"]) == 0.0}
+    assert at_zero["1_1_2_1_1"] > at_zero["2_2_1_1_1"]
+    summary = (out / "summary.md").read_text()
+    assert "| real | 3 | 6 |" in summary and "| +20 |" in summary and "FMR_zero" in summary
+    prints = list(csv.DictReader(open(out / "prints.csv")))
+    assert all(r["nfiq2"] for r in prints if r["name"].startswith("1_1_1"))
+
+
+def test_bad_input_is_one_sentence(match_data, tmp_path, capsys):
+    photos, rec = match_data
+    assert main(["eval", "match", str(photos / "1_1_1_1_0.png"), "-o", str(tmp_path / "a")]) == EXIT_INPUT
+    assert "at least two captures" in capsys.readouterr().err
+    assert main(["eval", "match", str(photos), "--naming", "(?P<x>.*)", "-o", str(tmp_path / "b")]) == EXIT_INPUT
+    assert "named groups" in capsys.readouterr().err
+    assert main(["eval", "match", str(photos), "--reconstructions", str(photos), "-o", str(tmp_path / "c")]) == EXIT_INPUT
+    assert "not a reconstruction folder" in capsys.readouterr().err
+    assert main(["eval", "match", str(photos), "--angles", "left", "-o", str(tmp_path / "d")]) == EXIT_INPUT
+    assert not any((tmp_path / n).exists() for n in "abcd")

@@ -1,0 +1,125 @@
+"""Contact-like prints, NIST's tools on them (nbis-py), and verification error rates."""
+import numpy as np
+import pytest
+
+from fingersplat3d.align.texture import estimate_ridge_period
+from fingersplat3d.errors import InputError
+from fingersplat3d.eval.contact import MAX_SIZE, TARGET_PERIOD_PX, contact_like
+from fingersplat3d.eval.verification import det_curve, equal_error_rate, error_rates, fnmr_at_fmr, fmr_resolution
+from fingersplat3d.synth import SynthConfig, synthesize
+
+
+@pytest.fixture(scope="module")
+def shots():
+    """Two synthetic fingers, two poses each (the CFPose-like rig: rolled and pitched shots)."""
+    return {seed: synthesize(seed, SynthConfig(rig="cfpose", size=(384, 480), poses=2)).capture for seed in (0, 1)}
+
+
+def test_print_is_upright_dark_ridged_white_backed_and_at_500_ppi(uwa640):
+    view = uwa640.views[1]  # the finger points left in the photo
+    contact = contact_like(view.image, view.mask)
+    image = contact.image
+    assert image.dtype == np.uint8 and image.ndim == 2
+    assert image[0].min() == 255 and image[:, 0].min() == 255  # white margin
+    inked = image < 255
+    rows = np.nonzero(inked.any(1))[0]
+    top, bottom = inked[rows[0] + 10].sum(), inked[rows[-1] - 10].sum()
+    assert top < bottom  # the rounded tip is at the top
+    period = estimate_ridge_period(image.astype(np.float32) / 255.0, inked)
+    assert abs(period - TARGET_PERIOD_PX) < 1.0
+    assert contact.fits_nfiq2 and image.shape[1] <= MAX_SIZE[0] + 17 and image.shape[0] <= MAX_SIZE[1] + 17
+
+
+def test_print_polarity_follows_the_ridges_option(uwa640):
+    view = uwa640.views[1]
+    bright, dark = (contact_like(view.image, view.mask, ridges=r).image.astype(float) for r in ("bright", "dark"))
+    inked = (bright < 255) & (dark < 255)
+    assert np.corrcoef(bright[inked] - 128, dark[inked] - 128)[0, 1] < -0.9  # one is the other inverted
+    with pytest.raises(InputError, match="ridges"):
+        contact_like(view.image, view.mask, ridges="up")
+
+
+def test_print_coordinates_map_back_to_the_photo(uwa640):
+    view = uwa640.views[0]
+    contact = contact_like(view.image, view.mask)
+    xy = np.array([[100.0, 200.0], [320.5, 255.25], [500.0, 10.0]])
+    assert np.allclose(contact.to_photo(contact.to_print(xy)), xy)
+    scale = np.sqrt(abs(np.linalg.det(contact.affine[:, :2])))
+    assert scale == pytest.approx(TARGET_PERIOD_PX / contact.period_px)
+
+
+def test_an_empty_mask_is_a_clear_error(uwa640):
+    view = uwa640.views[0]
+    with pytest.raises(InputError, match="no finger"):
+        contact_like(view.image, np.zeros_like(view.mask))
+    with pytest.raises(InputError, match="does not match"):
+        contact_like(view.image, view.mask[:10])
+
+
+def test_nist_tools_find_minutiae_score_quality_and_tell_fingers_apart(shots):
+    pytest.importorskip("nbis")
+    from fingersplat3d.eval.fingerprint import analyse, match_score
+
+    prints = {(seed, view.name): analyse(contact_like(view.image, view.mask))
+              for seed, capture in shots.items() for view in capture.views}
+    for fingerprint in prints.values():
+        assert fingerprint.count > 20
+        assert fingerprint.nfiq2 is not None and 0 <= fingerprint.nfiq2 <= 100
+        assert np.isfinite(fingerprint.minutiae).all()
+        assert ((fingerprint.minutiae[:, 2] >= 0) & (fingerprint.minutiae[:, 2] < 360)).all()
+    a, b = prints[(0, "p1")], prints[(1, "p1")]
+    assert match_score(a, a) > 100 > match_score(a, b)
+    genuine = match_score(prints[(0, "p1")], prints[(0, "p2")])
+    assert genuine > match_score(prints[(0, "p1")], prints[(1, "p2")])
+
+
+def test_minutiae_lie_on_the_finger_in_photo_pixels(shots):
+    pytest.importorskip("nbis")
+    from fingersplat3d.eval.fingerprint import analyse
+
+    view = shots[0].views[0]
+    fingerprint = analyse(contact_like(view.image, view.mask))
+    cols, rows = np.rint(fingerprint.minutiae[:, :2]).astype(int).T
+    inside = view.mask[np.clip(rows, 0, view.mask.shape[0] - 1), np.clip(cols, 0, view.mask.shape[1] - 1)]
+    assert inside.mean() > 0.95
+
+
+def test_a_print_nfiq2_cannot_score_is_a_recorded_failure(uwa640):
+    pytest.importorskip("nbis")
+    from fingersplat3d.eval.fingerprint import analyse, match_score
+
+    view = uwa640.views[1]
+    tiny = contact_like(view.image, view.mask, period_px=60.0)  # shrunk far below NFIQ2's 197 px
+    result = analyse(tiny)
+    assert result.nfiq2 is None and "NFIQ2" in result.failure
+    flat = contact_like(np.full_like(view.image, 0.5), view.mask)  # no ridges at all
+    blank = analyse(flat)
+    assert blank.nfiq2 is None or blank.nfiq2 < 10
+    assert match_score(blank, blank) >= 0
+
+
+def test_error_rates_on_hand_counted_scores():
+    genuine = [10, 20, 30, 40]
+    impostor = [0, 5, 15, 25]
+    thresholds, fmr, fnmr = det_curve(genuine, impostor)
+    assert np.all(np.diff(fmr) <= 0) and np.all(np.diff(fnmr) >= 0)
+    assert fmr[0] == 1.0 and fnmr[0] == 0.0 and fmr[-1] == 0.0 and fnmr[-1] == 1.0
+    # t = 20: impostors 25 accepted (1/4), genuines 10 rejected (1/4): the EER
+    assert equal_error_rate(genuine, impostor) == pytest.approx(0.25)
+    assert fnmr_at_fmr(genuine, impostor, 0.0) == pytest.approx(0.5)  # t = 26 or 30: 10 and 20 rejected
+    assert fnmr_at_fmr(genuine, impostor, 0.25) == pytest.approx(0.25)
+    assert fmr_resolution(4) == 0.25
+    rates = error_rates([1, 2], [0])
+    assert rates["eer"] == 0.0 and rates["fmr_zero"] == 0.0 and rates["genuine"] == 2
+
+
+def test_error_rates_at_the_extremes():
+    assert equal_error_rate([5, 5, 5], [5, 5]) == pytest.approx(0.5)  # all tied: chance
+    assert equal_error_rate([0], [10]) == pytest.approx(1.0)  # every comparison wrong
+    assert fnmr_at_fmr([1e300], [-1e300], 0.0) == 0.0
+    with pytest.raises(ValueError, match="genuine and impostor"):
+        error_rates([], [1])
+    with pytest.raises(ValueError, match="NaN"):
+        error_rates([np.nan], [1])
+    with pytest.raises(ValueError, match="target"):
+        fnmr_at_fmr([1], [0], 1.5)
