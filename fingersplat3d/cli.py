@@ -451,6 +451,68 @@ def _add_eval(commands) -> None:
     depth.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     depth.set_defaults(run=_run_eval_depth)
     _add_eval_match(actions)
+    _add_eval_register(actions)
+
+
+def _add_eval_register(actions) -> None:
+    register = actions.add_parser(
+        "register", help="minutiae carried between views: 3D model vs rigid 2D and TPS baselines",
+        description="Carry minutiae of view A into view B through each reconstruction (depth + cameras) and with "
+                    "the paper's 2D baselines (a RANSAC similarity and a thin-plate spline, fitted to the mates and "
+                    "cross-validated), and measure the mean pixel distance to their mates in B. Mates: --mates CSV, "
+                    "else ground truth (minutiae.json beside the capture's images/, or --truth), else mindtct minutiae "
+                    "of both photos paired as bozorth3 pairs them (the paper's UWA* protocol). Writes "
+                    "register_errors.csv, mates/, pictures/ and summary.md.")
+    register.add_argument("reconstructions", nargs="+", type=Path, help="reconstruction folders from 'fs3d fuse'")
+    register.add_argument("--pairs", type=_view_pairs,
+                          help="view pairs as A:B, comma-separated (default: the middle camera to each other camera)")
+    register.add_argument("--mates", type=Path, help="CSV with columns view_a, view_b, x_a, y_a, x_b, y_b")
+    register.add_argument("--truth", type=Path, help="minutiae.json with per-view ground truth (fs3d synth)")
+    register.add_argument("--matcher", action="store_true",
+                          help="mates from mindtct + bozorth3-style pairing even where ground truth exists (UWA*)")
+    register.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
+    register.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    register.set_defaults(run=_run_eval_register)
+
+
+def _view_pairs(text: str) -> list[tuple[str, str]]:
+    pairs = []
+    for item in text.split(","):
+        a, colon, b = item.strip().partition(":")
+        if not colon or not a or not b or a == b:
+            raise argparse.ArgumentTypeError(f"{item!r}: give pairs of two different views as A:B, e.g. center:left")
+        pairs.append((a, b))
+    return pairs
+
+
+def _run_eval_register(args: argparse.Namespace) -> int:
+    from .experiments.register import run_register_evaluation
+
+    check_free(args.output, args.overwrite)
+    if args.matcher and (args.mates is not None or args.truth is not None):
+        raise InputError("--matcher takes the mates from the photos: leave out --mates and --truth")
+    if args.mates is None and args.truth is None:
+        _nbis_needed("fs3d eval register (without --mates or --truth)")
+    if args.mates is not None and len(args.reconstructions) > 1:
+        raise InputError("--mates holds one reconstruction's mates: give one reconstruction with it")
+    for path in (args.mates, args.truth):
+        if path is not None and not path.is_file():
+            raise InputError(f"{path}: not found")
+    with atomic_dir(args.output, overwrite=args.overwrite) as folder:
+        rows = run_register_evaluation(args.reconstructions, folder, pairs=args.pairs, mates_csv=args.mates,
+                                       truth=args.truth, matcher=args.matcher)
+    done = [r for r in rows if r["status"] == "done"]
+    for method in ("3D", "rigid 2D", "TPS"):
+        values = [r["mean_px"] for r in done if r["method"] == method]
+        if values:
+            print(f"{method}: mean {statistics.mean(values):.2f} px over {len(values)} view pair(s)")
+    print(f"wrote {args.output}")
+    failed = [r for r in rows if r["status"] != "done"]
+    if failed:
+        print(f"fs3d eval register: {len(failed)} of {len(rows)} could not be scored (see {args.output / 'summary.md'})",
+              file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _add_eval_match(actions) -> None:

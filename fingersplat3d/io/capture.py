@@ -163,7 +163,7 @@ def write_capture(capture: Capture, folder: str | Path, *, minutiae: dict | None
     clashes = sorted(set(extra) & set(_RESERVED_KEYS))
     if clashes:
         raise ValueError(f"extra_manifest cannot replace the reserved keys {clashes}")
-    metadata = to_jsonable(capture.metadata)
+    metadata = to_jsonable({k: v for k, v in capture.metadata.items() if k != "sources"})  # files are new
     extra = to_jsonable(extra, "extra_manifest")
     files: dict[str, Any] = {"images": {}, "masks": {}, "depth": {}}
     with atomic_dir(folder, overwrite=overwrite) as temporary:
@@ -348,6 +348,8 @@ def read_capture(folder: str | Path, *, load_depth: bool = True, gray: bool | No
         except ValueError as error:  # should not happen after the checks above
             raise InputError(f"{files.folder}: view {name!r} is inconsistent ({error})") from None
     metadata = dict(files.metadata)
+    # where each photo is: a reconstruction's cameras.json names it, for tools that read the photos again
+    metadata["sources"] = {view.name: str(files.images[view.name].resolve()) for view in views}
     if cameras is not None:
         metadata["units"] = cameras.units
         if cameras.scale_mm_per_unit is not None:
