@@ -66,7 +66,9 @@ def test_capture_round_trip_is_exact(tmp_path, bits):
     back = read_capture(folder)
     assert_same_capture(capture, back)
     assert back["v1"].channels == 3 and back["v0"].channels == 1
+    sources = back.metadata.pop("sources")  # where each photo was read from, for cameras.json
     assert back.metadata == {"seed": 0, "rig": "ring", "units": "mm"}
+    assert sources == {name: str((folder / "images" / f"{name}.png").resolve()) for name in back.names}
     raw = cv2.imread(str(folder / "images" / "v0.png"), cv2.IMREAD_UNCHANGED)
     assert raw.dtype == (np.uint8 if bits == 8 else np.uint16)
     # and once more through disk: read -> write -> read keeps every value
