@@ -452,6 +452,67 @@ def _add_eval(commands) -> None:
     depth.set_defaults(run=_run_eval_depth)
     _add_eval_match(actions)
     _add_eval_register(actions)
+    _add_eval_quality(actions)
+
+
+def _add_eval_quality(actions) -> None:
+    quality = actions.add_parser(
+        "quality", help="leave-one-view-out renders against the real views: PSNR, SSIM, NFIQ2",
+        description="Register every view of each capture, then for each view fit Gaussians to the other views only, "
+                    "render the left-out view at its camera (placed, and aligned to the photo with the model frozen) "
+                    "and score it against the photo inside the finger mask: PSNR, SSIM, and NFIQ2 of the photo and "
+                    "of the render as contact-like prints. Writes quality.csv, views/ and summary.md.")
+    quality.add_argument("inputs", nargs="+", type=Path,
+                         help="capture folders, folders of UWA / CFPose images, or image files of one capture")
+    quality.add_argument("--splat-preset", choices=sorted(PRESETS), default="fast",
+                         help="Gaussian fit preset for the left-out fits (default fast)")
+    quality.add_argument("--no-nfiq2", action="store_true", help="PSNR and SSIM only")
+    quality.add_argument("--device", default="auto", help="where the fits run: auto (CUDA when available), cpu, cuda")
+    quality.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
+    quality.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    quality.set_defaults(run=_run_eval_quality)
+
+
+def _named_captures(inputs: list[Path]) -> list[tuple[str, object]]:
+    """``(name, capture)`` for everything the inputs hold (a capture folder is named after it)."""
+    from .io.capture import is_capture_folder
+    from .io.datasets import load_any
+
+    folders = [p for p in inputs if p.is_dir()]
+    files = [p for p in inputs if not p.is_dir()]
+    named = []
+    for folder in folders:
+        captures = load_any(folder)
+        for index, capture in enumerate(captures):
+            name = capture.metadata.get("name") or (folder.name if len(captures) == 1 else f"{folder.name}_{index}")
+            named.append((folder.name if is_capture_folder(folder) else name, capture))
+    if files:
+        named.append((files[0].stem, load_any(files)[0]))
+    return named
+
+
+def _run_eval_quality(args: argparse.Namespace) -> int:
+    from .experiments.quality import run_quality_evaluation
+    from .pipeline import FuseConfig
+
+    if not args.no_nfiq2:
+        _nbis_needed("fs3d eval quality (or give --no-nfiq2)")
+    check_free(args.output, args.overwrite)
+    captures = _named_captures(args.inputs)
+    config = FuseConfig(splat=preset(args.splat_preset), device=args.device)
+    with atomic_dir(args.output, overwrite=args.overwrite) as folder:
+        rows = run_quality_evaluation(captures, folder, config, nfiq2=not args.no_nfiq2)
+    done = [r for r in rows if r["status"] == "done"]
+    if done:
+        print(f"{len(done)} views: mean PSNR {statistics.mean(r['psnr'] for r in done):.2f} dB, "
+              f"SSIM {statistics.mean(r['ssim'] for r in done):.3f} (aligned)")
+    print(f"wrote {args.output}")
+    failed = len(rows) - len(done)
+    if failed:
+        print(f"fs3d eval quality: {failed} of {len(rows)} views could not be scored (see {args.output / 'summary.md'})",
+              file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _add_eval_register(actions) -> None:

@@ -13,7 +13,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -28,7 +28,7 @@ from .scene import Camera, Capture, View
 from .splat.voting import CleanConfig
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 
-__all__ = ["FuseConfig", "Reconstruction", "fuse", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
@@ -268,6 +268,14 @@ def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel:
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
     _orient_outward(cloud, cameras, aligned)
     return cloud
+
+
+def cloud_of_views(result: Reconstruction, views: Sequence[int], min_confidence: float = 0.05, voxel: float = 0.002):
+    """The fused cloud of ``views`` alone, from the reconstruction's depths and cameras (what a fit
+    that leaves the other views out starts from)."""
+    clouds = {v: _world_cloud(result.capture.views[v], result.cameras[v], result.depths[v], result.confidences[v],
+                              min_confidence) for v in views}
+    return _fused_cloud(clouds, result.cameras, list(views), voxel)
 
 
 def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.ndarray, min_confidence: float):

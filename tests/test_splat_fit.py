@@ -184,3 +184,17 @@ def test_depth_prior_pulls_the_surface_onto_the_geometry():
                          depths=depths)
     offset = lambda fit: float((fit.gaussians.means[:, 2] - truth.means[:, 2]).mean())  # noqa: E731
     assert abs(offset(held)) < 0.5 * abs(offset(free)) and abs(offset(held)) < 0.15
+
+
+def test_test_view_alignment_never_ends_worse_than_it_starts():
+    truth = _plane_scene(n_side=20)
+    cameras = _cameras(angles=(-15.0, 0.0, 15.0), size=(96, 72))
+    views = _views(truth, cameras)
+    # From the exact camera there is nothing to gain: the camera comes back (or one that matches as well).
+    aligned = fit_camera(truth, cameras[1], views[1].image, views[1].mask, iterations=20, lr_rotation=5e-2)
+    @torch.no_grad()
+    def loss(camera):
+        out = render_camera(truth, camera, near=0.1)
+        return float((out.color[..., 0] - torch.from_numpy(views[1].image).float()).abs().mean())
+
+    assert loss(aligned) <= loss(cameras[1]) + 1e-6

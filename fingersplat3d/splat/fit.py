@@ -128,6 +128,21 @@ def _render(model: Gaussians, world_to_cam: torch.Tensor, K: torch.Tensor, width
                      world_to_cam, K, width, height, near=near, background=background, backend=backend)
 
 
+def _blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
+    """``[H, W, C]`` blurred by a Gaussian of ``sigma`` pixels (separable, reflected borders)."""
+    if sigma <= 0:
+        return image
+    radius = max(1, int(math.ceil(3.0 * sigma)))
+    taps = torch.exp(-0.5 * (torch.arange(-radius, radius + 1, device=image.device, dtype=image.dtype) / sigma) ** 2)
+    taps = taps / taps.sum()
+    planes = image.permute(2, 0, 1)[:, None]  # [C, 1, H, W]
+    planes = torch.nn.functional.pad(planes, (radius, radius, 0, 0), mode="reflect")
+    planes = torch.nn.functional.conv2d(planes, taps.view(1, 1, 1, -1))
+    planes = torch.nn.functional.pad(planes, (0, 0, radius, radius), mode="reflect")
+    planes = torch.nn.functional.conv2d(planes, taps.view(1, 1, -1, 1))
+    return planes[:, 0].permute(1, 2, 0)
+
+
 def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: int, device) -> tuple:
     parameters = [torch.nn.Parameter(t.detach().clone().contiguous()) for t in model.tensors()]
     rates = [config.lr_means * extent, config.lr_quats, config.lr_scales, config.lr_opacity, config.lr_colors]
@@ -215,28 +230,49 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
 
 def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np.ndarray, *, iterations: int = 80,
                lr_rotation: float = 2e-3, lr_translation: float = 2e-3, lambda_dssim: float = 0.2,
-               near_fraction: float = 0.01) -> Camera:
+               near_fraction: float = 0.01, blur_px: float | None = None) -> Camera:
     """Refine one camera's pose so the frozen model's render matches ``image`` inside ``mask``.
 
-    Coarse-to-fine is unnecessary for the small corrections this is meant for (a held-out camera
-    placed from the rig, off by a few degrees); translations are relative to the scene extent.
+    Meant for small corrections (a held-out camera placed from the rig, off by a degree or two).
+    Ridges repeat every few pixels, so the loss of the sharp images has a minimum every ridge
+    period: the first half of the iterations compares both images blurred by ``blur_px`` (default:
+    ``width / 160``, about a ridge period), the second half the sharp ones. The pose with the lowest
+    sharp loss seen, the starting one included, is returned: the result never matches worse than
+    the camera it was given. Translations are relative to the scene extent.
     """
     device = gaussians.means.device
     model = gaussians.detach()
     target = FitTarget.from_view(View("target", image, mask), camera, device)
     extent = scene_extent(model.means)
     near = near_plane(model.means, camera, near_fraction)
+    sigma = camera.width / 160.0 if blur_px is None else blur_px
+    blurred_target = _blur(target.image, sigma)
     rotation = torch.zeros(3, device=device, requires_grad=True)
     translation = torch.zeros(3, device=device, requires_grad=True)
     optimizer = torch.optim.Adam([{"params": [rotation], "lr": lr_rotation, "name": "pose_rotation"},
                                   {"params": [translation], "lr": lr_translation * extent, "name": "pose_translation"}])
-    for _ in range(iterations):
+    best_loss, best = float("inf"), (torch.zeros(3, device=device), torch.zeros(3, device=device))
+    for step in range(iterations + 1):
         pose = apply_pose_correction(target.world_to_cam, rotation, translation)
         out = render_camera(model, camera, near, world_to_cam=pose)
-        loss = photometric_loss(out.color, target.image, target.mask, lambda_dssim)
+        coarse = step < iterations // 2 and sigma > 0
+        if not coarse:  # score every sharp step, the last one too, and keep the best pose
+            with torch.no_grad():
+                sharp = float(photometric_loss(out.color, target.image, target.mask, lambda_dssim))
+            if sharp < best_loss:
+                best_loss, best = sharp, (rotation.detach().clone(), translation.detach().clone())
+        if step == iterations:
+            break
+        if coarse:
+            loss = photometric_loss(_blur(out.color, sigma), blurred_target, target.mask, lambda_dssim)
+        else:
+            loss = photometric_loss(out.color, target.image, target.mask, lambda_dssim)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
     with torch.no_grad():
-        pose = apply_pose_correction(target.world_to_cam.double(), rotation.double(), translation.double())
+        initial = float(photometric_loss(render_camera(model, camera, near).color, target.image, target.mask, lambda_dssim))
+        if initial <= best_loss:
+            best = (torch.zeros(3, device=device), torch.zeros(3, device=device))
+        pose = apply_pose_correction(target.world_to_cam.double(), best[0].double(), best[1].double())
     return Camera(camera.K, pose.cpu().numpy(), camera.width, camera.height)

@@ -1,0 +1,171 @@
+"""``fs3d eval quality``: how real the synthesized views look (PSNR, SSIM, NFIQ2), leave one view out.
+
+For each capture (synthetic or real, 2+ views):
+
+1. all views are registered (``fuse`` without the splat stage): the held-out view's camera comes
+   from the same registration, as test cameras of pose-free 3DGS benchmarks come from all views;
+2. for each view ``k``: Gaussians are fitted to the *other* views only, starting from the fused
+   cloud of those views (:func:`fingersplat3d.pipeline.cloud_of_views`), and rendered at ``k``'s
+   camera ("placed") and again after aligning that camera to the photo with the model frozen
+   (:func:`fingersplat3d.splat.fit.fit_camera`, "aligned", as pose-free 3DGS evaluation does);
+3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), and NFIQ2 of the
+   real photo and of the aligned render, both as contact-like prints
+   (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque).
+
+Writes ``quality.csv`` (one row per capture and view; failures are rows with their reason),
+``views/<capture>__<view>.png`` (photo | render | both prints) and ``summary.md`` beside the
+paper's NFIQ2 figures.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import FS3DError
+
+__all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
+
+PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
+"""The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
+COLUMNS = ("capture", "view", "status", "reason", "train_views", "psnr_placed", "ssim_placed", "psnr", "ssim",
+           "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+
+
+def _gray8(image: np.ndarray) -> np.ndarray:
+    gray = image if image.ndim == 2 else image.mean(2)
+    return (np.clip(gray, 0, 1) * 255).astype(np.uint8)
+
+
+def _tile(parts: list[np.ndarray], height: int = 360) -> np.ndarray:
+    tiles = []
+    for part in parts:
+        scale = height / part.shape[0]
+        tiles.append(cv2.resize(part, (max(1, int(round(part.shape[1] * scale))), height), interpolation=cv2.INTER_AREA))
+        tiles.append(np.full((height, 8), 255, np.uint8))
+    return np.hstack(tiles[:-1])
+
+
+def _nfiq2(image: np.ndarray, mask: np.ndarray):
+    from ..eval.contact import contact_like
+    from ..eval.fingerprint import analyse
+
+    try:
+        contact = contact_like(image, mask)
+    except FS3DError as error:
+        return None, str(error), None
+    result = analyse(contact)
+    return result.nfiq2, result.failure, contact.image
+
+
+def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = True, progress: bool = False) -> list[dict]:
+    """The rows of one capture (see the module docstring)."""
+    from ..device import resolve_device
+    from ..eval.image import image_scores
+    from ..pipeline import cloud_of_views, fuse
+    from ..splat.fit import fit_camera
+    from ..splat.novel import render_views
+    from ..splat.stage import run_splat_stage
+
+    if len(capture) < 2:
+        return [{"capture": name, "view": "", "status": "failed", "reason": "one view: nothing to leave out"}]
+    result = fuse(capture, replace(config, splat=None))
+    views = result.capture.views  # with the masks fuse used
+    aligned = [v for v, ok in enumerate(result.report["alignment"]["aligned"].values()) if ok]
+    device = resolve_device(config.device)
+    rows = []
+    for k, view in enumerate(views):
+        row = {"capture": name, "view": view.name}
+        train = [v for v in aligned if v != k]
+        if k not in aligned or not train:
+            rows.append(dict(row, status="failed", reason="the view was not registered with the others" if k not in aligned
+                             else "no other registered view to fit"))
+            continue
+        try:
+            cloud = cloud_of_views(result, train, config.min_confidence, config.voxel)
+            stage = run_splat_stage(views, result.cameras, train, cloud, config.splat, config.clean,
+                                    depths=result.depths, device=device, progress=progress)
+        except FS3DError as error:
+            rows.append(dict(row, status="failed", reason=str(error)))
+            continue
+        model = stage.gaussians.to(device)
+        placed = result.cameras[k]
+        before = render_views(model, [(view.name, placed)])[0]
+        after = render_views(model, [(view.name, fit_camera(model, placed, view.image, view.mask))])[0]
+        scores_before = image_scores(before.image, view.image, view.mask)
+        scores = image_scores(after.image, view.image, view.mask)
+        row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train),
+                   psnr_placed=scores_before.psnr, ssim_placed=scores_before.ssim, psnr=scores.psnr, ssim=scores.ssim,
+                   fit_s=stage.report["fit_seconds"])
+        parts = [_gray8(view.image), _gray8(after.image)]
+        if nfiq2:
+            real, real_failure, real_print = _nfiq2(view.image, view.mask)
+            render, render_failure, render_print = _nfiq2(after.image, after.alpha >= 0.5)
+            row.update(nfiq2_real="" if real is None else real, nfiq2_render="" if render is None else render,
+                       nfiq2_failure="; ".join(f"{who}: {why}" for who, why in (("real", real_failure),
+                                                                               ("render", render_failure)) if why))
+            parts += [p for p in (real_print, render_print) if p is not None]
+        cv2.imwrite(str(out / "views" / f"{name}__{view.name}.png"), _tile(parts))
+        rows.append(row)
+    return rows
+
+
+def run_quality_evaluation(captures: list[tuple[str, object]], out: Path, config, *, nfiq2: bool = True,
+                           progress: bool = True) -> list[dict]:
+    """Every ``(name, capture)``; one that cannot be fused is a failed row with its reason."""
+    from tqdm import tqdm
+
+    (out / "views").mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name, capture in tqdm(captures, desc="fs3d eval quality", unit="capture", disable=not progress):
+        try:
+            rows += evaluate_capture(name, capture, config, out, nfiq2=nfiq2)
+        except FS3DError as error:
+            rows.append({"capture": name, "view": "", "status": "failed", "reason": str(error)})
+    with open(out / "quality.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, COLUMNS)
+        writer.writeheader()
+        writer.writerows({k: row.get(k, "") for k in COLUMNS} for row in rows)
+    (out / "summary.md").write_text(summary_markdown(rows))
+    return rows
+
+
+def _mean(rows: list[dict], key: str) -> tuple[float | None, int]:
+    values = [float(r[key]) for r in rows if r.get(key) not in (None, "")]
+    finite = [v for v in values if np.isfinite(v)]
+    return (float(np.mean(finite)) if finite else None), len(finite)
+
+
+def summary_markdown(rows: list[dict]) -> str:
+    done = [r for r in rows if r["status"] == "done"]
+    lines = ["# Synthesized views against the real ones (leave one view out)", "",
+             f"{len(done)} of {len(rows)} views scored: Gaussians fitted without the view, rendered at its registered "
+             "camera (placed) and after aligning that camera to the photo with the model frozen (aligned).", ""]
+    if done:
+        lines += ["| capture | view | PSNR dB placed -> aligned | SSIM placed -> aligned | NFIQ2 real | NFIQ2 render |",
+                  "|---|---|---|---|---|---|"]
+        for r in done:
+            lines.append(f"| {r['capture']} | {r['view']} | {r['psnr_placed']:.2f} -> {r['psnr']:.2f} | "
+                         f"{r['ssim_placed']:.3f} -> {r['ssim']:.3f} | {r.get('nfiq2_real', '') or '—'} | "
+                         f"{r.get('nfiq2_render', '') or '—'} |")
+        lines += ["", "| mean over views | value | views |", "|---|---|---|"]
+        for key, label in (("psnr", "PSNR dB (aligned)"), ("ssim", "SSIM (aligned)"), ("nfiq2_real", "NFIQ2 real"),
+                           ("nfiq2_render", "NFIQ2 render")):
+            value, count = _mean(done, key)
+            if value is not None:
+                lines.append(f"| {label} | {value:.3f} | {count} |")
+        lines += ["", "The paper's mean NFIQ2 on UWA: " + ", ".join(f"{k} {v}" for k, v in PAPER_NFIQ2.items()) +
+                  ". NFIQ2 here scores contact-like prints made from the photos (see `fs3d eval match --help`), so "
+                  "compare the gap between real and render, not the level."]
+        failures = [r for r in done if r.get("nfiq2_failure")]
+        if failures:
+            lines += ["", "NFIQ2 could not score:", ""] + [f"- {r['capture']} {r['view']}: {r['nfiq2_failure']}"
+                                                          for r in failures]
+    failed = [r for r in rows if r["status"] != "done"]
+    if failed:
+        lines += ["", "Not scored:", ""] + [f"- {r['capture']} {r['view']}: {r['reason']}".replace("  ", " ")
+                                            for r in failed]
+    return "\n".join(lines) + "\n"
