@@ -1,6 +1,6 @@
 """The machine every benchmark names: CPU, cores (and those this process may use), load, library versions.
 
-Used by ``tools/bench_*.py`` (and the coming ``fs3d bench``); no files written.
+Used by ``fs3d bench`` and ``tools/bench_*.py``; no files written.
 """
 from __future__ import annotations
 

@@ -1,0 +1,57 @@
+"""Rig consistency: a check of real reconstructions that needs no ground truth.
+
+A rig is fixed hardware, so the relative rotation ``R_j R_i^T`` of two of its cameras is the same
+in every capture. :func:`rig_consistency` takes one record per capture (``capture`` name,
+``registered`` view count, ``sizes`` [[w, h]] and ``world_to_cam`` 4x4 per view, in the rig's camera
+order) and gives, per camera pair, the robust mean relative rotation over the captures (an
+iteratively reweighted rotation mean, so one failed capture does not drag it) and each capture's
+deviation from it in degrees. A camera stored portrait (its image transposed against the same
+camera's in the other captures) sees the rig turned by +-90 degrees about its optical axis; that
+roll is taken out (the sign that agrees with the other captures) before comparing. Pure numpy/scipy.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["PAIRS", "rig_consistency"]
+
+PAIRS = ((0, 1), (0, 2), (1, 2))
+
+
+def rig_consistency(records: list[dict]) -> dict:
+    """Per camera pair: each capture's deviation from the robust mean relative rotation (degrees)."""
+    from scipy.spatial.transform import Rotation
+
+    from ..align.rig import quarter_turn, robust_rotation_mean
+
+    usable = [r for r in records if r["registered"] == 3]
+    if len(usable) < 2:
+        return {}
+    sizes = np.array([[tuple(s) for s in r["sizes"]] for r in usable])  # [C, 3, 2]
+    rotations = {}
+    for r in usable:
+        R = [np.asarray(pose)[:3, :3] for pose in r["world_to_cam"]]
+        rotations[r["capture"]] = R
+    # A camera stored portrait: its frame is the rig's rolled by +-90 degrees; pick the sign that agrees.
+    for k in range(3):
+        majority = max(set(map(tuple, sizes[:, k])), key=lambda size: int(np.sum(np.all(sizes[:, k] == size, axis=1))))
+        for r, size in zip(usable, sizes[:, k]):
+            if tuple(size) != majority:
+                others = [rotations[o["capture"]] for o in usable if o is not r]
+                best = None
+                for sign in (1, -1):
+                    trial = list(rotations[r["capture"]])
+                    trial[k] = quarter_turn(sign % 4) @ trial[k]
+                    cost = sum(Rotation.from_matrix((trial[j] @ trial[i].T) @ (o[j] @ o[i].T).T).magnitude()
+                               for o in others for i, j in PAIRS)
+                    best = min(best, (cost, sign, trial), key=lambda t: t[0]) if best else (cost, sign, trial)
+                rotations[r["capture"]] = best[2]
+                r["roll_corrected"] = {"camera": k, "sign": best[1]}
+    result = {}
+    for i, j in PAIRS:
+        relative = {name: R[j] @ R[i].T for name, R in rotations.items()}
+        mean = Rotation.from_matrix(robust_rotation_mean(list(relative.values())))
+        deviation = {name: float(np.degrees((Rotation.from_matrix(rel) * mean.inv()).magnitude())) for name, rel in relative.items()}
+        result[f"{i}{j}"] = {"mean_angle_deg": float(np.degrees(mean.magnitude())), "deviation_deg": deviation,
+                             "median_deg": float(np.median(list(deviation.values())))}
+    return result
