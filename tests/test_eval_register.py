@@ -96,6 +96,9 @@ def test_command_with_ground_truth_mates(fused, tmp_path, capsys):
     for side in ("left", "right"):
         assert error[(side, "3D")] < 5.0  # 640x512, through the fused geometry
         assert error[(side, "3D")] < error[(side, "rigid 2D")]
+    for row in rows:  # the mates-free check: A's ridges land on B's, in phase
+        if row["method"] == "3D":
+            assert float(row["warp_shift_px"]) < 2.0 and float(row["warp_ncc"]) > 0.4
     assert len(list((out / "pictures").glob("*.png"))) == 2 and len(list((out / "mates").glob("*.csv"))) == 2
     summary = (out / "summary.md").read_text()
     assert "52.27" in summary and "| uwa_seed0 | center -> left |" in summary

@@ -39,7 +39,7 @@ PAPER_FIGURES = {"rigid 2D": 52.27, "TPS": 26.18, "VGGT": 10.45, "FingerSplat": 
 """The paper's mean distance (px) between mapped and mated minutiae on UWA ("UWA*" mates)."""
 METHODS = ("3D", "rigid 2D", "TPS")
 COLUMNS = ("reconstruction", "view_a", "view_b", "mates_source", "mates", "scored", "method", "mean_px",
-           "median_px", "p90_px", "status", "reason")
+           "median_px", "p90_px", "warp_shift_px", "warp_ncc", "status", "reason")
 COLOURS = {"3D": (40, 40, 230), "rigid 2D": (230, 160, 40), "TPS": (200, 60, 200)}  # BGR
 
 
@@ -180,6 +180,28 @@ def _errors(mates: Mates, rec: _Reconstruction, view_a: str, view_b: str) -> tup
     return errors, np.where(scored[:, None], carried, np.nan)
 
 
+def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: "_Reconstruction", view_a: str, view_b: str) -> dict:
+    """A check of the 3D registration that needs no mates: photo A warped into B through the model,
+    both as ridge texture (band-passed, unit local RMS) where both see the finger; the global shift
+    between them by phase correlation (px; ~0 when the model carries A onto B) and their normalised
+    correlation as they are (ridges in phase: well above 0; half a ridge period off: about 0)."""
+    from ..align.texture import as_gray, estimate_ridge_period, ridge_texture
+    from ..align.transfer import warp_image
+    from ..segment.masks import finger_mask
+
+    camera_a, camera_b = rec.cameras.cameras[view_a], rec.cameras.cameras[view_b]
+    warped, valid = warp_image(as_gray(photo_a), rec.depth(view_a), camera_a, rec.depth(view_b), camera_b)
+    gray_b = as_gray(photo_b)
+    both = valid & finger_mask(photo_b)
+    if both.sum() < 1000:
+        return {"warp_shift_px": float("nan"), "warp_ncc": float("nan")}
+    period = estimate_ridge_period(gray_b, both)
+    texture_a, texture_b = ridge_texture(warped, both, period), ridge_texture(gray_b, both, period)
+    (dx, dy), _ = cv2.phaseCorrelate(texture_a.astype(np.float64), texture_b.astype(np.float64))
+    ncc = float(np.corrcoef(texture_a[both], texture_b[both])[0, 1])
+    return {"warp_shift_px": float(np.hypot(dx, dy)), "warp_ncc": ncc}
+
+
 def _picture(path: Path, photo_b: np.ndarray, mates: Mates, predictions: dict[str, np.ndarray]) -> None:
     """View B with each mate (green circle) and a line to where each method put it."""
     gray = np.clip(photo_b if photo_b.ndim == 2 else photo_b.mean(2), 0, 1)
@@ -230,6 +252,9 @@ def evaluate_pair(rec: _Reconstruction, view_a: str, view_b: str, user: dict | N
         writer = csv.writer(handle)
         writer.writerow(["x_a", "y_a", "x_b", "y_b", "x_3d", "y_3d"])
         writer.writerows(np.column_stack([mates.xy_a, mates.xy_b, carried]).round(3).tolist())
+    check = {}
+    if rec.photo_path(view_a) is not None and rec.photo_path(view_b) is not None:
+        check = warp_check(rec.photo(view_a), rec.photo(view_b), rec, view_a, view_b)
     if rec.photo_path(view_b) is not None:
         from ..eval.warp2d import BASELINES
 
@@ -242,6 +267,8 @@ def evaluate_pair(rec: _Reconstruction, view_a: str, view_b: str, user: dict | N
         values = errors[method][np.isfinite(errors[method])]
         row = dict(base, method=method, scored=int(values.size), status="done" if values.size else "failed",
                    reason="" if values.size else "no mate could be scored")
+        if method == "3D":
+            row.update(check)
         if values.size:
             row.update(mean_px=float(values.mean()), median_px=float(np.median(values)),
                        p90_px=float(np.percentile(values, 90)))
@@ -290,16 +317,23 @@ def summary_markdown(rows: list[dict]) -> str:
     done = [r for r in rows if r["status"] == "done"]
     lines = ["# Registration error: minutiae carried from view A to view B", "",
              "Mean distance (px) between where each method puts a minutia of A in B and its mate in B; the "
-             "2D baselines are fitted to the mates (5-fold cross-validated), 3D uses none.", ""]
+             "2D baselines are fitted to the mates (5-fold cross-validated), 3D uses none. The warp check needs no "
+             "mates: photo A carried into B through the model against B's own ridges (the global shift left "
+             "between them, and their correlation; a wrong model leaves a shift or a correlation near 0, and "
+             "3D errors far above the warp check's shift point at wrong mates).", ""]
     if done:
-        lines += ["| reconstruction | A -> B | mates (source) | scored | 3D | rigid 2D | TPS |", "|---|---|---|---|---|---|---|"]
+        lines += ["| reconstruction | A -> B | mates (source) | scored | 3D | rigid 2D | TPS | warp check: shift px, NCC |",
+                  "|---|---|---|---|---|---|---|---|"]
         keys = sorted({(r["reconstruction"], r["view_a"], r["view_b"]) for r in done})
         for key in keys:
             by = {r["method"]: r for r in done if (r["reconstruction"], r["view_a"], r["view_b"]) == key}
             first = next(iter(by.values()))
             cells = [f"{by[m]['mean_px']:.2f} (median {by[m]['median_px']:.2f})" if m in by else "—" for m in METHODS]
+            three = by.get("3D", {})
+            check = (f"{three['warp_shift_px']:.1f}, {three['warp_ncc']:.2f}"
+                     if np.isfinite(three.get("warp_shift_px", np.nan)) else "—")
             lines.append(f"| {key[0]} | {key[1]} -> {key[2]} | {first['mates']} ({first['mates_source']}) | "
-                         f"{first['scored']} | " + " | ".join(cells) + " |")
+                         f"{first['scored']} | " + " | ".join(cells) + f" | {check} |")
         lines += ["", "| method | mean over pairs (px) | median over pairs (px) |", "|---|---|---|"]
         for method in METHODS:
             values = [r["mean_px"] for r in done if r["method"] == method]
