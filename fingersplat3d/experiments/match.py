@@ -139,7 +139,7 @@ def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, p
     """Prints of a reconstruction rendered at ``angles``: ``(finger, capture, gallery view, [(angle, print)])``."""
     from ..device import resolve_device
     from ..io.gaussians_ply import read_gaussians_ply
-    from ..splat.camera_path import cameras_at_angles, rig_geometry
+    from ..splat.camera_path import cameras_at_angles, middle_camera
     from ..splat.novel import render_views
 
     if not (folder / "gaussians.ply").is_file():
@@ -148,12 +148,10 @@ def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, p
     finger, capture = identities[0][0], identities[0][1]
     inputs = list(cameras.cameras.values())
     try:
-        rig = rig_geometry(inputs)
+        reference = middle_camera(inputs)
         placed = cameras_at_angles(inputs, angles)
     except ValueError as error:
         raise InputError(f"{folder}: cannot place novel views: {error}") from None
-    middle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
-    reference = int(rig.order[int(np.argmin(np.abs(rig.angles_deg[rig.order] - middle)))])
     gallery_view = identities[reference][2]
     model = read_gaussians_ply(folder / "gaussians.ply").to(resolve_device("auto"))
     results = []

@@ -54,17 +54,15 @@ class Mates:
 
 def default_pairs(cameras) -> list[tuple[str, str]]:
     """The middle camera (by angle about the rig axis) to each other camera."""
-    from ..splat.camera_path import rig_geometry
+    from ..splat.camera_path import middle_camera
 
     names = cameras.names
     if len(names) < 2:
         raise InputError("a reconstruction with one view has no pair of views to register")
     try:
-        rig = rig_geometry(list(cameras.cameras.values()))
+        middle = names[middle_camera(list(cameras.cameras.values()))]
     except ValueError:  # cameras that do not share an axis: the first view to the others
         return [(names[0], n) for n in names[1:]]
-    middle_angle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
-    middle = names[int(rig.order[int(np.argmin(np.abs(rig.angles_deg[rig.order] - middle_angle)))])]
     return [(middle, n) for n in names if n != middle]
 
 

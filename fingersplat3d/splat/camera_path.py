@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from ..eval.poses import rotation_angle_deg
 from ..scene import Camera
 
-__all__ = ["RigGeometry", "rig_geometry", "arc_cameras", "cameras_at_angles"]
+__all__ = ["middle_camera", "RigGeometry", "rig_geometry", "arc_cameras", "cameras_at_angles"]
 
 _MIN_ROTATION_RAD = 1e-6
 
@@ -104,9 +104,7 @@ def cameras_at_angles(cameras: Sequence[Camera], angles_deg: Sequence[float],
     cameras = _upright(list(cameras))
     rig = rig_geometry(cameras)
     if reference is None:
-        middle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
-        distance = np.abs(rig.angles_deg[rig.order] - middle)
-        reference = cameras[int(rig.order[int(np.argmin(distance))])]
+        reference = cameras[_middle(rig)]
     elif not isinstance(reference, Camera):
         reference = cameras[int(reference)]
     result = []
@@ -115,6 +113,18 @@ def cameras_at_angles(cameras: Sequence[Camera], angles_deg: Sequence[float],
         result.append(_camera(reference.K.copy(), turn @ reference.rotation.T, _turn(reference.center, rig, angle),
                               reference.width, reference.height))
     return result
+
+
+def middle_camera(cameras: Sequence[Camera]) -> int:
+    """Index of the middle camera about the rig axis: the one whose angle is nearest the middle of
+    the span (with two cameras, the leftmost). Cameras stored portrait against the others count as
+    turned back upright."""
+    return _middle(rig_geometry(_upright(list(cameras))))
+
+
+def _middle(rig: RigGeometry) -> int:
+    middle = 0.5 * (rig.angles_deg.min() + rig.angles_deg.max())
+    return int(rig.order[int(np.argmin(np.abs(rig.angles_deg[rig.order] - middle)))])
 
 
 # --- helpers -----------------------------------------------------------------------------------
