@@ -434,6 +434,14 @@ def _run_register(args: argparse.Namespace) -> int:
     return 0
 
 
+def _finished(command: str, failed: int, total: int, what: str, output: Path) -> int:
+    """Exit status of an experiment that wrote its results: 0, or 4 with one line when some failed."""
+    if failed:
+        print(f"{command}: {failed} of {total} {what} (see {output / 'summary.md'})", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
+
+
 def _add_bench(commands) -> None:
     """``fs3d bench``: its arguments."""
     from .experiments.bench import sweep
@@ -480,10 +488,7 @@ def _run_bench(args: argparse.Namespace) -> int:
         result = run_bench(settings, list(range(args.seeds)), folder, size=args.size, real=args.real, device=args.device)
     failed = [r for r in result["rows"] if r["status"] != "done"]
     print(f"wrote {args.output}: {len(result['rows']) - len(failed)} of {len(result['rows'])} runs")
-    if failed:
-        print(f"fs3d bench: {len(failed)} runs failed (see {args.output / 'summary.md'})", file=sys.stderr)
-        return EXIT_INCOMPLETE
-    return 0
+    return _finished("fs3d bench", len(failed), len(result["rows"]), "runs failed", args.output)
 
 
 def _add_eval(commands) -> None:
@@ -560,12 +565,7 @@ def _run_eval_quality(args: argparse.Namespace) -> int:
         print(f"{len(done)} views: mean PSNR {statistics.mean(r['psnr'] for r in done):.2f} dB, "
               f"SSIM {statistics.mean(r['ssim'] for r in done):.3f} (aligned)")
     print(f"wrote {args.output}")
-    failed = len(rows) - len(done)
-    if failed:
-        print(f"fs3d eval quality: {failed} of {len(rows)} views could not be scored (see {args.output / 'summary.md'})",
-              file=sys.stderr)
-        return EXIT_INCOMPLETE
-    return 0
+    return _finished("fs3d eval quality", len(rows) - len(done), len(rows), "views could not be scored", args.output)
 
 
 def _add_eval_register(actions) -> None:
@@ -621,12 +621,7 @@ def _run_eval_register(args: argparse.Namespace) -> int:
         if values:
             print(f"{method}: mean {statistics.mean(values):.2f} px over {len(values)} view pair(s)")
     print(f"wrote {args.output}")
-    failed = [r for r in rows if r["status"] != "done"]
-    if failed:
-        print(f"fs3d eval register: {len(failed)} of {len(rows)} could not be scored (see {args.output / 'summary.md'})",
-              file=sys.stderr)
-        return EXIT_INCOMPLETE
-    return 0
+    return _finished("fs3d eval register", len(rows) - len(done), len(rows), "could not be scored", args.output)
 
 
 def _add_eval_match(actions) -> None:
@@ -702,11 +697,8 @@ def _run_eval_match(args: argparse.Namespace) -> int:
     if not summary["protocols"]:
         print("fs3d eval match: no two prints could be compared (see summary.md)", file=sys.stderr)
         return EXIT_INCOMPLETE
-    if summary["failed"]:
-        print(f"fs3d eval match: {len(summary['failed'])} of {summary['prints']} photos or renders gave no print "
-              f"(see {args.output / 'summary.md'})", file=sys.stderr)
-        return EXIT_INCOMPLETE
-    return 0
+    return _finished("fs3d eval match", len(summary["failed"]), summary["prints"], "photos or renders gave no print",
+                     args.output)
 
 
 def _run_eval_depth(args: argparse.Namespace) -> int:
@@ -732,12 +724,7 @@ def _run_eval_depth(args: argparse.Namespace) -> int:
         print(f"wrote {args.output}: {len(done)} of {len(rows)} scored; mean MAE after scale + shift "
               f"{statistics.mean(r['mae_scale_shift'] for r in done):.4f}, confidence-weighted "
               f"{statistics.mean(r['mae_weighted'] for r in done):.4f} (ground-truth units)")
-    failed = len(rows) - len(done)
-    if failed:
-        print(f"fs3d eval depth: {failed} of {len(rows)} could not be scored (see {args.output / 'summary.md'})",
-              file=sys.stderr)
-        return EXIT_INCOMPLETE
-    return 0
+    return _finished("fs3d eval depth", len(rows) - len(done), len(rows), "could not be scored", args.output)
 
 
 def _run_batch(args: argparse.Namespace) -> int:

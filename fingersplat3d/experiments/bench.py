@@ -23,7 +23,6 @@ Writes ``bench.csv``, ``summary.md`` (tables, machine named) and ``trade_depth.p
 """
 from __future__ import annotations
 
-import csv
 import multiprocessing
 import resource
 import time
@@ -32,6 +31,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .tables import write_rows
 
 __all__ = ["Setting", "sweep", "run_bench", "RING_ANGLES"]
 
@@ -240,10 +241,7 @@ def _aggregate(rows: list[dict], setting: Setting) -> dict | None:
 
 def _write(out: Path, rows, real_rows, settings, info, seeds, size) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "bench.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows({k: row.get(k, "") for k in COLUMNS} for row in rows)
+    write_rows(out / "bench.csv", COLUMNS, rows)
     machine_line = (f"{info.get('cpu', '?')}, {info.get('cores', '?')} cores, torch {info.get('torch', '?')}, "
                     f"device {info.get('device', 'cpu')}")
     lines = ["# Speed / accuracy trade", "", f"Machine: {machine_line}.", "",

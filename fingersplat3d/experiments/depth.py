@@ -17,13 +17,13 @@ included with their reason), ``summary.md`` and ``error_maps/<name>.png``.
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from .tables import write_rows
 from ..errors import FS3DError, InputError
 from ..eval import depth_errors
 from ..io.depth import depth_colormap
@@ -167,10 +167,7 @@ def run_depth_evaluation(cases: list[DepthCase], out: Path, config, *, unpaired:
             rows += _evaluate(case, config, maps)
         except FS3DError as error:
             rows.append({"name": case.name, "status": "failed", "reason": str(error)})
-    with open(out / "depth_errors.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, COLUMNS)
-        writer.writeheader()
-        writer.writerows({k: row.get(k, "") for k in COLUMNS} for row in rows)
+    write_rows(out / "depth_errors.csv", COLUMNS, rows)
     (out / "summary.md").write_text(summary_markdown(rows, unpaired))
     return rows
 

@@ -19,7 +19,6 @@ print: minutiae, NFIQ2, failure), ``prints/`` (the prints as PNG), ``summary.md`
 """
 from __future__ import annotations
 
-import csv
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .tables import write_rows
 from ..errors import FS3DError, InputError
 
 __all__ = ["UWA_NAMING", "Sample", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
@@ -199,11 +199,11 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                                  "genuine": int(sample.finger == finger), "angle_deg": angle,
                                  "score": match_score(render.fingerprint, real[k].fingerprint)})
     all_prints = real + [p for *_, renders in synthesized for _, p in renders]
-    _write_csv(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
+    write_rows(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
                  "failure": p.failure} for p in all_prints])
-    _write_csv(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score"), rows)
+    write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score"), rows)
     summary = summarise(rows, all_prints)
     (out / "summary.md").write_text(summary_markdown(summary))
     curves = {}
@@ -219,13 +219,6 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
 
         det_picture(out / "det.png", curves, "bozorth3 on mindtct minutiae")
     return summary
-
-
-def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:
-    with open(path, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, columns)
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 def _split(rows: list[dict], protocol: str, angle: float | None = None) -> tuple[list[int], list[int]]:

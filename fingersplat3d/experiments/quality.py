@@ -18,13 +18,13 @@ paper's NFIQ2 figures.
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from .tables import write_rows
 from ..errors import FS3DError
 
 __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
@@ -125,10 +125,7 @@ def run_quality_evaluation(captures: list[tuple[str, object]], out: Path, config
             rows += evaluate_capture(name, capture, config, out, nfiq2=nfiq2)
         except FS3DError as error:
             rows.append({"capture": name, "view": "", "status": "failed", "reason": str(error)})
-    with open(out / "quality.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, COLUMNS)
-        writer.writeheader()
-        writer.writerows({k: row.get(k, "") for k in COLUMNS} for row in rows)
+    write_rows(out / "quality.csv", COLUMNS, rows)
     (out / "summary.md").write_text(summary_markdown(rows))
     return rows
 

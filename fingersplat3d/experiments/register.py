@@ -30,6 +30,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .tables import write_rows
 from ..errors import FS3DError, InputError
 
 __all__ = ["PAPER_FIGURES", "Mates", "default_pairs", "read_mates_csv", "truth_mates", "matcher_mates",
@@ -303,10 +304,7 @@ def run_register_evaluation(folders: list[Path], out: Path, *, pairs: list[tuple
         except FS3DError as error:
             rows.append({"reconstruction": rec.folder.name, "view_a": a, "view_b": b, "status": "failed",
                          "reason": str(error)})
-    with open(out / "register_errors.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, COLUMNS)
-        writer.writeheader()
-        writer.writerows({k: row.get(k, "") for k in COLUMNS} for row in rows)
+    write_rows(out / "register_errors.csv", COLUMNS, rows)
     (out / "summary.md").write_text(summary_markdown(rows))
     return rows
 
