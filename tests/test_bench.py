@@ -70,3 +70,14 @@ def test_a_small_sweep_end_to_end(tmp_path):
         assert row["status"] == "done" and float(row["wall_s"]) > 0 and float(row["peak_rss_mb"]) > 100
         assert float(row["depth_mae_mm"]) < 2.0
     assert rows[2]["held_out_psnr_db"] == "nan"  # every view fused: none held out
+
+
+def test_working_resolution_resizes_photos_with_or_without_masks(uwa640):
+    from fingersplat3d.experiments.bench import _resized
+
+    view = uwa640.views[0]
+    half = _resized(view, 0.5)
+    assert half.image.shape[:2] == (256, 320) and half.mask.shape == (256, 320) and half.depth.shape == (256, 320)
+    assert half.camera.width == 320
+    bare = _resized(view.with_(mask=None, depth=None, camera=None), 0.75)  # a real photo: nothing but the image
+    assert bare.image.shape[:2] == (384, 480) and bare.mask is None

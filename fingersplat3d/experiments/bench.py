@@ -89,7 +89,8 @@ def _resized(view, scale: float):
         return view
     size = (max(8, int(round(view.width * scale))), max(8, int(round(view.height * scale))))
     image = cv2.resize(view.image, size, interpolation=cv2.INTER_AREA)
-    mask = cv2.resize(view.mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
+    mask = None if view.mask is None else cv2.resize(view.mask.astype(np.uint8), size,
+                                                      interpolation=cv2.INTER_NEAREST).astype(bool)
     depth = None if view.depth is None else cv2.resize(view.depth, size, interpolation=cv2.INTER_NEAREST)
     camera = None if view.camera is None else view.camera.scaled(scale)
     return view.with_(image=image, mask=mask, depth=depth, camera=camera)
@@ -213,7 +214,10 @@ def run_bench(settings: list[Setting], seeds: list[int], out: Path, *, size: tup
     if real is not None:
         for key in tqdm(sorted({s.geometry_key for s in settings}), desc="fs3d bench (real)", unit="setting",
                         disable=not progress):
-            real_rows[key] = _in_process(run_real, key[0], str(real))
+            try:
+                real_rows[key] = _in_process(run_real, key[0], str(real))
+            except Exception as error:  # a failed setting is a row, not the end of the bench
+                real_rows[key] = {"failed": f"{type(error).__name__}: {error}"}
     from ..device import resolve_device
 
     info = dict(machine(), device=str(resolve_device(device)))
@@ -266,6 +270,9 @@ def _write(out: Path, rows, real_rows, settings, info, seeds, size) -> None:
                   "| resolution | captures | all views registered | median deviation ° | max deviation ° | fuse s (median) | peak RSS MB |",
                   "|---|---|---|---|---|---|---|"]
         for key, r in sorted(real_rows.items()):
+            if "failed" in r:
+                lines.append(f"| {key[0]:g}x | failed: {r['failed']} | | | | | |")
+                continue
             lines.append(f"| {key[0]:g}x | {r['captures']} | {r['registered_all']} | {r['rig_deviation_median_deg']:.2f} | "
                          f"{r['rig_deviation_max_deg']:.2f} | {r['fuse_s_median']:.1f} | {r['peak_rss_mb']:.0f} |")
     failed = [r for r in rows if r["status"] != "done"]
