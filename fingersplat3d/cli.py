@@ -545,7 +545,8 @@ def _named_captures(inputs: list[Path]) -> list[tuple[str, object]]:
             name = capture.metadata.get("name") or (folder.name if len(captures) == 1 else f"{folder.name}_{index}")
             named.append((folder.name if is_capture_folder(folder) else name, capture))
     if files:
-        named.append((files[0].stem, load_any(files)[0]))
+        capture = load_any(files)[0]
+        named.append((capture.metadata.get("name") or files[0].stem, capture))
     return named
 
 

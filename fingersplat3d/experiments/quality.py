@@ -10,7 +10,8 @@ For each capture (synthetic or real, 2+ views):
    (:func:`fingersplat3d.splat.fit.fit_camera`, "aligned", as pose-free 3DGS evaluation does);
 3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), and NFIQ2 of the
    real photo and of the aligned render, both as contact-like prints
-   (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque).
+   (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque and is
+   scaled by the photo's ridge period: a blurred render must not read as a coarser finger).
 
 Writes ``quality.csv`` (one row per capture and view; failures are rows with their reason),
 ``views/<capture>__<view>.png`` (photo | render | both prints) and ``summary.md`` beside the
@@ -49,16 +50,17 @@ def _tile(parts: list[np.ndarray], height: int = 360) -> np.ndarray:
     return np.hstack(tiles[:-1])
 
 
-def _nfiq2(image: np.ndarray, mask: np.ndarray):
+def _nfiq2(image: np.ndarray, mask: np.ndarray, period_px: float | None = None):
+    """NFIQ2 of a photo or render as a contact-like print: ``(score, failure, print, ridge period)``."""
     from ..eval.contact import contact_like
     from ..eval.fingerprint import analyse
 
     try:
-        contact = contact_like(image, mask)
+        contact = contact_like(image, mask, period_px=period_px)
     except FS3DError as error:
-        return None, str(error), None
+        return None, str(error), None, period_px
     result = analyse(contact)
-    return result.nfiq2, result.failure, contact.image
+    return result.nfiq2, result.failure, contact.image, contact.period_px
 
 
 def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = True, progress: bool = False) -> list[dict]:
@@ -102,8 +104,9 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
                    fit_s=stage.report["fit_seconds"])
         parts = [_gray8(view.image), _gray8(after.image)]
         if nfiq2:
-            real, real_failure, real_print = _nfiq2(view.image, view.mask)
-            render, render_failure, render_print = _nfiq2(after.image, after.alpha >= 0.5)
+            real, real_failure, real_print, period = _nfiq2(view.image, view.mask)
+            # the render is of the same view at the same scale: its print is made at the photo's ridge period
+            render, render_failure, render_print, _ = _nfiq2(after.image, after.alpha >= 0.5, period)
             row.update(nfiq2_real="" if real is None else real, nfiq2_render="" if render is None else render,
                        nfiq2_failure="; ".join(f"{who}: {why}" for who, why in (("real", real_failure),
                                                                                ("render", render_failure)) if why))
