@@ -545,8 +545,10 @@ def _named_captures(inputs: list[Path]) -> list[tuple[str, object]]:
             name = capture.metadata.get("name") or (folder.name if len(captures) == 1 else f"{folder.name}_{index}")
             named.append((folder.name if is_capture_folder(folder) else name, capture))
     if files:
-        capture = load_any(files)[0]
-        named.append((capture.metadata.get("name") or files[0].stem, capture))
+        captures = load_any(files)
+        for index, capture in enumerate(captures):
+            named.append((capture.metadata.get("name") or (files[0].stem if len(captures) == 1 else f"{files[0].stem}_{index}"),
+                          capture))
     return named
 
 
