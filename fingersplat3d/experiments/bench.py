@@ -294,5 +294,6 @@ def _write(out: Path, rows, real_rows, settings, info, seeds, size) -> None:
             for knob in curves:
                 curves[knob].append((aggregates[baseline]["wall_s"], aggregates[baseline][metric], baseline.label))
         if curves:
-            trade_picture(out / name, curves, "wall time of a fuse (s)", label, f"{label} against time ({machine_line})")
+            trade_picture(out / name, curves, "wall time of a fuse (s)", label, f"{label} against time, one knob at a time",
+                          note=machine_line)
 

@@ -43,8 +43,9 @@ def det_picture(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], ti
 
 
 def trade_picture(path: Path, curves: dict[str, list[tuple[float, float, str]]], x_label: str, y_label: str,
-                  title: str) -> Path:
-    """One curve per knob: ``{knob: [(time, error, setting label), ...]}``, points labelled."""
+                  title: str, note: str = "") -> Path:
+    """One curve per knob: ``{knob: [(time, error, setting label), ...]}``, points labelled; ``note``
+    (the machine) in small print under the plot."""
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(7, 5), dpi=120)
     for knob, points in curves.items():
@@ -55,10 +56,12 @@ def trade_picture(path: Path, curves: dict[str, list[tuple[float, float, str]]],
             axes.annotate(label, (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7)
     axes.set_xlabel(x_label)
     axes.set_ylabel(y_label)
-    axes.set_title(title)
+    axes.set_title(title, fontsize=10)
     axes.grid(True, alpha=0.3)
     axes.legend(fontsize=8)
-    figure.tight_layout()
+    if note:
+        figure.text(0.01, 0.01, note, fontsize=7, color="0.35")
+    figure.tight_layout(rect=(0, 0.03 if note else 0, 1, 1))
     figure.savefig(path)
     plt.close(figure)
     return path
