@@ -106,3 +106,15 @@ def test_bad_input_is_one_sentence(match_data, tmp_path, capsys):
     assert "not a reconstruction folder" in capsys.readouterr().err
     assert main(["eval", "match", str(photos), "--angles", "left", "-o", str(tmp_path / "d")]) == EXIT_INPUT
     assert not any((tmp_path / n).exists() for n in "abcd")
+
+
+def test_real_captures_make_prints_nfiq2_scores_and_a_table(real_dev, tmp_path):
+    # Two captures of each of the two dev fingers, front camera: every photo becomes a scored print.
+    photos = [real_dev / f"{c}_0.jpg" for c in ("1_1_1_1", "1_1_2_1", "2_2_8_1", "2_2_9_1")]
+    out = tmp_path / "real"
+    assert main(["eval", "match", *map(str, photos), "-o", str(out)]) == 0
+    prints = list(csv.DictReader(open(out / "prints.csv")))
+    assert len(prints) == 4 and all(20 < int(p["minutiae"]) and 0 <= float(p["nfiq2"]) <= 100 for p in prints)
+    rows = list(csv.DictReader(open(out / "scores.csv")))
+    assert sum(r["genuine"] == "1" for r in rows) == 2 and sum(r["genuine"] == "0" for r in rows) == 4
+    assert "| real | 2 | 4 |" in (out / "summary.md").read_text()
