@@ -7,6 +7,8 @@ The implementation is NIST's NBIS and NFIQ2 as packaged by ``nbis-py`` (pinned 0
 * :func:`analyse`: minutiae (in the *photo's* pixels, through the print's affine map) and the NFIQ2
   score. A print NFIQ2 cannot score (too small, no ridge flow) is a :class:`Fingerprint` with
   ``nfiq2`` None and the reason in ``failure``; its minutiae are still extracted when mindtct can.
+* :func:`fingerprint_of`: a photo or render (and its finger mask, found when not given) made a
+  print and analysed; a photo with no finger is a failure reason, not an exception.
 * :func:`match_score`: the bozorth3 score of two fingerprints (0 when either has no minutiae).
   bozorth3 scores are not normalised: above ~40 is the classic "probably the same finger".
 """
@@ -19,9 +21,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .contact import ContactImage
+from ..errors import FS3DError
+from .contact import ContactImage, contact_like
 
-__all__ = ["Fingerprint", "analyse", "match_score", "nbis_available"]
+__all__ = ["Fingerprint", "analyse", "fingerprint_of", "match_score", "nbis_available"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,6 +97,22 @@ def analyse(contact: ContactImage, nfiq2: bool = True) -> Fingerprint:
     kinds = tuple("bifurcation" if "BIF" in str(m.kind()).upper() else "ending" for m in found)
     minutiae = np.column_stack([photo_xy, photo_angles, reliability]) if len(found) else np.zeros((0, 4))
     return Fingerprint(minutiae, kinds, score, failure, template)
+
+
+def fingerprint_of(image: np.ndarray, mask: np.ndarray | None = None, *, ridges: str = "bright",
+                   period_px: float | None = None, nfiq2: bool = True, name: str = "image"
+                   ) -> tuple[ContactImage | None, Fingerprint | None, str]:
+    """``(print, fingerprint, failure)`` of a photo or render; ``mask`` None: the finger mask is found.
+    When no print can be made (no finger), print and fingerprint are None and ``failure`` says why."""
+    from ..segment.masks import finger_mask
+
+    try:
+        contact = contact_like(image, finger_mask(image, name=name) if mask is None else mask, ridges=ridges,
+                               period_px=period_px)
+    except FS3DError as error:
+        return None, None, str(error)
+    fingerprint = analyse(contact, nfiq2=nfiq2)
+    return contact, fingerprint, fingerprint.failure
 
 
 def _photo_angles(contact: ContactImage, degrees: np.ndarray) -> np.ndarray:

@@ -109,19 +109,12 @@ class _Print:
 
 
 def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str) -> _Print:
-    from ..eval.contact import contact_like
-    from ..eval.fingerprint import analyse
-    from ..segment.masks import finger_mask
+    from ..eval.fingerprint import fingerprint_of
 
-    try:
-        if mask is None:
-            mask = finger_mask(image, name=name)
-        contact = contact_like(image, mask, ridges=ridges)
-    except FS3DError as error:
-        return _Print(name, None, str(error))
-    cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), contact.image)
-    fingerprint = analyse(contact)
-    return _Print(name, fingerprint, fingerprint.failure)
+    contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name)
+    if contact is not None:
+        cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), contact.image)
+    return _Print(name, fingerprint, failure)
 
 
 def _reconstruction_identity(folder: Path, pattern: re.Pattern):

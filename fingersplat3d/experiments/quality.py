@@ -52,15 +52,12 @@ def _tile(parts: list[np.ndarray], height: int = 360) -> np.ndarray:
 
 def _nfiq2(image: np.ndarray, mask: np.ndarray, period_px: float | None = None):
     """NFIQ2 of a photo or render as a contact-like print: ``(score, failure, print, ridge period)``."""
-    from ..eval.contact import contact_like
-    from ..eval.fingerprint import analyse
+    from ..eval.fingerprint import fingerprint_of
 
-    try:
-        contact = contact_like(image, mask, period_px=period_px)
-    except FS3DError as error:
-        return None, str(error), None, period_px
-    result = analyse(contact)
-    return result.nfiq2, result.failure, contact.image, contact.period_px
+    contact, fingerprint, failure = fingerprint_of(image, mask, period_px=period_px)
+    if contact is None:
+        return None, failure, None, period_px
+    return fingerprint.nfiq2, failure, contact.image, contact.period_px
 
 
 def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = True, progress: bool = False) -> list[dict]:

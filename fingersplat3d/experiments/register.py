@@ -106,15 +106,15 @@ def truth_mates(minutiae: dict, view_a: str, view_b: str) -> Mates | None:
 
 def matcher_mates(photo_a: np.ndarray, photo_b: np.ndarray) -> Mates:
     """The "UWA*" mates: mindtct minutiae of both photos, paired as bozorth3 pairs them."""
-    from ..eval.contact import contact_like
-    from ..eval.fingerprint import analyse
+    from ..eval.fingerprint import fingerprint_of
     from ..eval.minutiae_pairs import pair_minutiae
-    from ..segment.masks import finger_mask
 
     found = []
     for photo in (photo_a, photo_b):
-        contact = contact_like(photo, finger_mask(photo))
-        found.append((analyse(contact, nfiq2=False), contact.ppi_scale))
+        contact, fingerprint, failure = fingerprint_of(photo, nfiq2=False)
+        if contact is None:
+            raise InputError(failure)
+        found.append((fingerprint, contact.ppi_scale))
     (a, scale_a), (b, scale_b) = found
     index_a, index_b, _ = pair_minutiae(a.minutiae[:, :2] * scale_a, a.minutiae[:, 2],
                                         b.minutiae[:, :2] * scale_b, b.minutiae[:, 2])

@@ -256,23 +256,15 @@ def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np
         pose = apply_pose_correction(target.world_to_cam, rotation, translation)
         out = render_camera(model, camera, near, world_to_cam=pose)
         coarse = step < iterations // 2 and sigma > 0
-        if not coarse:  # score every sharp step, the last one too, and keep the best pose
-            with torch.no_grad():
-                sharp = float(photometric_loss(out.color, target.image, target.mask, lambda_dssim))
-            if sharp < best_loss:
-                best_loss, best = sharp, (rotation.detach().clone(), translation.detach().clone())
+        sharp = photometric_loss(out.color, target.image, target.mask, lambda_dssim) if not coarse or step == 0 else None
+        if sharp is not None and float(sharp.detach()) < best_loss:  # the start, then every sharp step: keep the best
+            best_loss, best = float(sharp.detach()), (rotation.detach().clone(), translation.detach().clone())
         if step == iterations:
             break
-        if coarse:
-            loss = photometric_loss(_blur(out.color, sigma), blurred_target, target.mask, lambda_dssim)
-        else:
-            loss = photometric_loss(out.color, target.image, target.mask, lambda_dssim)
+        loss = photometric_loss(_blur(out.color, sigma), blurred_target, target.mask, lambda_dssim) if coarse else sharp
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
     with torch.no_grad():
-        initial = float(photometric_loss(render_camera(model, camera, near).color, target.image, target.mask, lambda_dssim))
-        if initial <= best_loss:
-            best = (torch.zeros(3, device=device), torch.zeros(3, device=device))
         pose = apply_pose_correction(target.world_to_cam.double(), best[0].double(), best[1].double())
     return Camera(camera.K, pose.cpu().numpy(), camera.width, camera.height)
