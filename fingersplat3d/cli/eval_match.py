@@ -1,0 +1,73 @@
+"""``fs3d eval match``: mindtct + bozorth3 matching of photos and synthesized views."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..atomic import atomic_dir, check_free
+from ..errors import EXIT_INCOMPLETE, InputError
+from .common import finished, nbis_needed
+from .types import angle_list
+
+__all__ = ['add', 'run']
+
+
+def add(actions) -> None:
+    from ..experiments.match import DEFAULT_ANGLES, UWA_NAMING
+
+    match = actions.add_parser(
+        "match", help="mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET",
+        description="Make a contact-like print (8-bit gray, ridges dark, ~500 ppi, tip up) of every photo, find its "
+                    "minutiae (mindtct) and NFIQ2, and score every two photos of different captures seen by the same "
+                    "camera with bozorth3: genuine when the finger is the same (read from the file names), impostor "
+                    "otherwise. With --reconstructions, each model is rendered at --angles about its rig axis and "
+                    "compared with the real photos of the finger's other captures (and of other fingers). Writes "
+                    "scores.csv, prints.csv, prints/, summary.md (EER, FNMR at FMR 1 % and 0.01 %, FMR_zero, "
+                    "scores by angle) and det.png.")
+    match.add_argument("inputs", nargs="+", type=Path, help="photos, or folders of photos")
+    match.add_argument("--reconstructions", nargs="+", type=Path, default=[], metavar="REC",
+                       help="reconstruction folders from 'fs3d fuse' (with their Gaussians) to synthesize views from")
+    match.add_argument("--naming", default=UWA_NAMING,
+                       help="regular expression on file stems with named groups 'capture' and 'finger' (or "
+                            "'subject' and 'hand'), optional 'view' and 'session'; default: the UWA 3D/2D naming "
+                            "subject_finger_capture_session_frame")
+    match.add_argument("--views", help="comma-separated view labels to use (e.g. 0,1,2: UWA's plain-light frames)")
+    match.add_argument("--angles", type=angle_list, default=DEFAULT_ANGLES,
+                       help="render angles in degrees about the rig axis, comma-separated, as --angles=-30,0,30 (default "
+                            f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
+    match.add_argument("--ridges", choices=("bright", "dark"), default="bright",
+                       help="how ridge crests look in the photos (default bright: contactless rigs' plain light)")
+    match.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
+    match.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    match.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..experiments.match import parse_samples, run_match_evaluation
+    from ..io.images import find_files
+
+    nbis_needed("fs3d eval match")
+    check_free(args.output, args.overwrite)
+    views = {v.strip() for v in args.views.split(",") if v.strip()} if args.views else None
+    samples, unparsed = parse_samples(find_files(args.inputs), args.naming, views)
+    for path in unparsed:
+        print(f"fs3d eval match: {path.name} does not follow the naming pattern; skipped", file=sys.stderr)
+    if len({s.capture for s in samples}) < 2:
+        raise InputError(f"{len(samples)} photos from {len({s.capture for s in samples})} capture(s): matching needs "
+                         "photos of at least two captures, named so that the finger and capture can be read")
+    for folder in args.reconstructions:
+        if not (folder / "cameras.json").is_file():
+            raise InputError(f"{folder}: not a reconstruction folder (no cameras.json; make one with 'fs3d fuse')")
+    with atomic_dir(args.output, overwrite=args.overwrite) as folder:
+        summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
+                                       naming=args.naming, ridges=args.ridges)
+    for protocol, rates in summary["protocols"].items():
+        eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
+        print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")
+    print(f"wrote {args.output}")
+    if not summary["protocols"]:
+        print("fs3d eval match: no two prints could be compared (see summary.md)", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return finished("fs3d eval match", len(summary["failed"]), summary["prints"], "photos or renders gave no print",
+                     args.output)

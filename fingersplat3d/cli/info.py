@@ -1,0 +1,56 @@
+"""``fs3d info``: what a capture folder, a dataset folder or a set of images holds."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ['add', 'run', 'describe']
+
+
+def add(commands) -> None:
+    """``fs3d info``: its arguments."""
+    info = commands.add_parser("info", help="describe a capture folder or a dataset folder",
+                               description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds.")
+    info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder or image files")
+    info.add_argument("--json", action="store_true", help="machine-readable output")
+    info.set_defaults(run=run)
+
+
+def describe(capture) -> dict:
+    views = [{"name": v.name, "size": f"{v.width}x{v.height}", "channels": v.channels,
+              "mask": v.mask is not None, "camera": v.camera is not None, "depth": v.depth is not None}
+             for v in capture.views]
+    keys = ("dataset", "rig", "seed", "pattern_class", "ridge_period_mm", "units", "subject", "finger", "capture")
+    return {"views": views, **{k: capture.metadata[k] for k in keys if k in capture.metadata}}
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..io.capture import capture_files, is_capture_folder, read_capture
+    from ..io.minutiae import read_minutiae
+
+    paths = args.path
+    if len(paths) == 1 and is_capture_folder(paths[0]):
+        capture = read_capture(paths[0])
+        report = {"path": str(paths[0]), "kind": "capture folder", **describe(capture)}
+        files = capture_files(paths[0])
+        if files.minutiae is not None:
+            minutiae = read_minutiae(files.minutiae)
+            report["minutiae"] = len(minutiae.get("minutiae_3d", []))
+            report["visible_minutiae"] = {k: sum(e["visible"] for e in v) for k, v in minutiae.get("views", {}).items()}
+        captures = [report]
+    else:
+        from ..io.datasets import load_any
+
+        captures = [{"kind": "dataset capture", **describe(c)} for c in load_any(paths)]
+    if args.json:
+        print(json.dumps(captures, indent=2))
+    else:
+        for report in captures:
+            head = {k: v for k, v in report.items() if k != "views"}
+            print(", ".join(f"{k}: {v}" for k, v in head.items()))
+            for view in report["views"]:
+                flags = [k for k in ("mask", "camera", "depth") if view[k]]
+                print(f"  {view['name']}: {view['size']}, {'gray' if view['channels'] == 1 else 'RGB'}"
+                      + (f", with {', '.join(flags)}" if flags else ""))
+    return 0

@@ -1,0 +1,80 @@
+"""``fs3d``: the command line. Thin: parses arguments, calls the library, reports errors in one line.
+
+Each command's arguments and runner live in a module of their own (``add(commands)`` registers the
+arguments and sets ``run``); this one only assembles them and turns errors into exit statuses.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .. import __version__
+from ..errors import EXIT_INPUT, FS3DError
+from . import (
+    batch,
+    bench,
+    eval_depth,
+    eval_match,
+    eval_quality,
+    eval_register,
+    fuse,
+    info,
+    preview,
+    register,
+    render,
+    rig,
+    synth,
+)
+
+__all__ = ["main", "build_parser"]
+
+COMMANDS = (synth, fuse, info, preview, render, batch, rig)
+EVAL_ACTIONS = (eval_depth, eval_match, eval_register, eval_quality)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Argument errors as one sentence (``fs3d fuse: error: ...``), exit status 2; ``--help`` shows the usage."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="fs3d",
+        description="fingersplat3d: 3D fingerprints from 2-3 uncalibrated photos of a finger.",
+        epilog="Run 'fs3d COMMAND --help' for the options of each command.",
+    )
+    parser.add_argument("--version", action="version", version=f"fingersplat3d {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for command in COMMANDS:
+        command.add(commands)
+    evaluate = commands.add_parser("eval", help="the paper's experiments: depth error, matching, view registration, image quality",
+                                   description="Evaluate reconstructions against ground truth.")
+    actions = evaluate.add_subparsers(dest="action", metavar="ACTION", required=True)
+    for action in EVAL_ACTIONS:
+        action.add(actions)
+    register.add(commands)
+    bench.add(commands)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help and --version exit 0 as argparse does; argument errors return 2
+        if stop.code == EXIT_INPUT:
+            return EXIT_INPUT
+        raise
+    try:
+        return args.run(args)
+    except (FS3DError, FileExistsError, FileNotFoundError) as error:
+        print(f"fs3d {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_INPUT
+    except BrokenPipeError:  # output piped into head & co.
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print("fs3d: interrupted", file=sys.stderr)
+        return 130

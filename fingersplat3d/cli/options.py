@@ -1,0 +1,68 @@
+"""Option groups several commands share (registration, splatting, dataset selection) and the configs they make."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..align.register import MATCHERS, RegistrationConfig
+from ..splat.config import DEFAULT_PRESET, PRESETS, preset
+from .types import COUNT, POSITIVE, STEPS
+
+__all__ = ['add_registration_arguments', 'add_splat_arguments', 'add_dataset_arguments', 'splat_config', 'fuse_config', 'read_rig']
+
+
+def add_registration_arguments(parser) -> None:
+    parser.add_argument("--matcher", default="surface", choices=MATCHERS,
+                        help="first correspondences between views: surface (default: ridge texture unwrapped on cylinder "
+                             "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
+    parser.add_argument("--guided-rounds", type=STEPS, default=RegistrationConfig.guided_rounds,
+                        help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds})")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+
+
+def add_splat_arguments(parser) -> None:
+    splat = parser.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
+    splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
+    splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
+                       help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
+    splat.add_argument("--splat-iterations", type=STEPS, help="override the preset's optimisation steps")
+    splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=POSITIVE, dest="splat_gaussians_per_cell",
+                       help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
+                            "(--splat-budget-density: its former name)")
+    splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
+
+
+def add_dataset_arguments(parser) -> None:
+    parser.add_argument("dataset", type=Path, nargs="+",
+                        help="a UWA or CFPose folder, a folder of capture folders, a CSV with columns name,paths, or image files")
+    parser.add_argument("--select", help="a subset: subject=S, finger=F, capture=C, name=N, count=K (comma-separated)")
+    parser.add_argument("--address", help="join this Ray cluster (e.g. ray://head:10001 or auto) instead of a local instance")
+    parser.add_argument("--workers", type=COUNT, help="local Ray: CPUs to use (default: the cores this process may use)")
+    parser.add_argument("--threads-per-task", type=COUNT, default=1,
+                        help="CPUs declared per capture and torch threads inside it (default 1: one capture per core)")
+    add_registration_arguments(parser)
+
+
+def splat_config(args: argparse.Namespace):
+    """The splat settings from ``--splat-*`` (None with ``--no-splat``)."""
+    if args.no_splat:
+        return None
+    return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
+                  refine_poses=False if args.no_pose_refinement else None)
+
+
+def fuse_config(args: argparse.Namespace):
+    """The fuse settings shared by ``fuse``-like commands (``batch``, ``rig calibrate``)."""
+    from ..pipeline import FuseConfig
+
+    registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed)
+    return FuseConfig(registration=registration, splat=splat_config(args) if hasattr(args, "no_splat") else None,
+                      mesh=getattr(args, "mesh", False))
+
+
+def read_rig(path: Path | None):
+    if path is None:
+        return None
+    from ..io.rig import read_rig
+
+    return read_rig(path)

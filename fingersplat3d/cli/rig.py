@@ -1,0 +1,99 @@
+"""``fs3d rig calibrate``: a fixed rig's poses and focal from many captures."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from ..align.global_opt import GlobalAlignConfig
+from ..atomic import check_free
+from ..errors import EXIT_NOT_REGISTERED, InputError
+from .options import add_dataset_arguments, fuse_config
+from .types import number
+
+__all__ = ['add', 'run', 'register_job']
+
+
+def add(commands) -> None:
+    """``fs3d rig calibrate``: its arguments."""
+    rig = commands.add_parser("rig", help="a fixed camera rig: calibrate it from many captures",
+                              description="Tools for a fixed multi-camera rig (UWA's three cameras).")
+    actions = rig.add_subparsers(dest="action", metavar="ACTION", required=True)
+    calibrate = actions.add_parser(
+        "calibrate", help="estimate the rig's camera poses and focal from many captures (no target needed)",
+        description="Register every capture (on Ray), then fit one set of camera poses and one focal length to "
+                    "the correspondences of all captures jointly, leaving out captures that disagree. Writes "
+                    "rig.json (the cameras.json schema without the finger) for 'fs3d fuse --rig' and 'fs3d batch --rig'.")
+    add_dataset_arguments(calibrate)
+    calibrate.add_argument("-o", "--output", type=Path, required=True, help="rig.json to write")
+    calibrate.add_argument("--rounds", type=number(int, 0, 20), default=0,
+                           help="then re-match every capture through the calibrated rig and fit again, this many times "
+                                "(default 0; each round costs one more registration per capture, see the README)")
+    calibrate.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    calibrate.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..align.rig import calibrate_rig
+    from ..batch.engine import ray_map
+    from ..io.jobs import list_jobs
+    from ..io.rig import write_rig
+
+    check_free(args.output, args.overwrite)
+    jobs = list_jobs(args.dataset, args.select)
+    config = fuse_config(args)
+    captures, failures = [], {}
+
+    def on_result(job, capture, error):
+        if error is not None:
+            failures[job.name] = error
+        elif not all(capture.alignment.aligned):
+            failures[job.name] = "not every view registered"
+        else:
+            captures.append(capture)
+
+    def register(selected, rig=None, desc="fs3d rig calibrate"):
+        return ray_map(register_job, selected, (config, args.threads_per_task, rig), on_result, address=args.address,
+                       cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
+
+    run = register(jobs)
+    names = sorted({c.view_names for c in captures})
+    if len(captures) < 2:
+        print(f"fs3d rig calibrate: only {len(captures)} of {len(jobs)} captures registered with all their views; "
+              "a rig needs at least 2", file=sys.stderr)
+        return EXIT_NOT_REGISTERED
+    if len(names) != 1:
+        raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
+    start = time.perf_counter()
+    fit = replace(GlobalAlignConfig(), polish_iterations=400, polish_rounds=3)
+    calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
+    for round_ in range(args.rounds):  # re-match through the rig, fit again (its matches snap to the right ridges)
+        used = [job for job in jobs if job.name in calibration.used]
+        captures.clear()
+        register(used, calibration.rig, desc=f"fs3d rig calibrate: round {round_ + 1}")
+        if len(captures) < 2:
+            break
+        calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
+    rig = calibration.rig
+    rig.info.update(failed=failures, rounds=args.rounds, register_seconds=round(run["wall_s"], 1),
+                    fit_seconds=round(time.perf_counter() - start, 1))
+    write_rig(args.output, rig)
+    from ..eval.poses import rotation_angle_deg
+
+    angles = ", ".join(f"{rig.names[i]}-{rig.names[j]} {rotation_angle_deg(rig.rotations[i], rig.rotations[j]):.2f} deg"
+                       for i in range(len(rig.names)) for j in range(i + 1, len(rig.names)))
+    print(f"wrote {args.output}: {len(calibration.used)} captures used ({len(calibration.left_out)} left out, "
+          f"{len(failures)} not registered), focal {rig.focal:.1f} px, {angles}")
+    return 0
+
+
+def register_job(job, config, threads: int, rig=None):
+    """A Ray task of 'fs3d rig calibrate': one capture registered (what the calibration pools)."""
+    from ..device import use_threads
+    from ..io.jobs import load_job
+    from ..pipeline import register_capture
+
+    use_threads(threads)
+    return register_capture(load_job(job), config, rig)
