@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["FS3DError", "InputError", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED", "EXIT_INCOMPLETE"]
+__all__ = ["FS3DError", "InputError", "InputNote", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED", "EXIT_INCOMPLETE"]
 
 EXIT_INPUT = 2
 EXIT_NOT_REGISTERED = 3
@@ -32,6 +32,13 @@ class FS3DError(Exception):
 
 class InputError(FS3DError, ValueError):
     """Bad input: a missing, unreadable, empty, mismatched or malformed file or argument."""
+
+
+class InputNote(UserWarning):
+    """Something about the input was set aside and the run went on (a foreign ``manifest.json``, say).
+
+    Issued with :func:`warnings.warn`; ``fs3d`` prints it as one line, ``fs3d CMD: note: ...``.
+    """
 
 
 def input_error(path: str | Path | None, problem: str) -> InputError:

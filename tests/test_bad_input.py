@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fingersplat3d.io.capture as capture_module
-from fingersplat3d.errors import InputError
+from fingersplat3d.errors import InputError, InputNote
 from fingersplat3d.io import (load_image_folder, load_uwa, read_cameras, read_capture, read_depth, read_minutiae,
                               write_capture, write_depth)
 from fingersplat3d.scene import Camera, Capture, View
@@ -209,7 +209,7 @@ def test_cameras_size_differs_from_image(folder):
 
 
 @pytest.mark.parametrize("change, problem", [
-    (lambda data: data.update(format="something-else"), "format"),
+    (lambda data: data.update(format="fingersplat3d-reconstruction"), "format"),
     (lambda data: data.update(version=99), "newer"),
     (lambda data: data.update(version="1"), "version"),
     (lambda data: data.update(views="v0"), "views"),
@@ -222,6 +222,26 @@ def test_cameras_size_differs_from_image(folder):
 def test_malformed_manifest(folder, change, problem):
     edit_json(folder / "manifest.json", change)
     assert problem in raises_naming("manifest.json", read_capture, folder)
+
+
+@pytest.mark.parametrize("foreign", [{"format": "acme-dataset", "subject": 3}, {"subject": 3}, ["v0", "v1"]])
+def test_foreign_manifest_is_ignored_with_a_note(folder, foreign):
+    """A manifest.json another tool wrote (a dataset's own) is set aside with a note; images/ is read."""
+    (folder / "manifest.json").write_text(json.dumps(foreign))
+    with pytest.warns(InputNote, match="not a fingersplat3d capture manifest"):
+        capture = read_capture(folder)
+    assert capture.names == ["v0", "v1", "v2"] and capture_module.is_capture_folder(folder)
+    (folder / "images").rename(folder / "photos")  # then it is no capture folder at all
+    assert not capture_module.is_capture_folder(folder)
+
+
+def test_foreign_manifest_note_on_the_command_line(folder, capsys):
+    from fingersplat3d.cli import main
+
+    (folder / "manifest.json").write_text(json.dumps({"format": "acme-dataset"}))
+    assert main(["info", str(folder)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fs3d info: note: ") and "acme-dataset" in err[0]
 
 
 def test_manifest_invalid_json(folder):

@@ -145,3 +145,22 @@ def test_load_any_dispatch(tmp_path):
         load_any([plain, plain / "left.jpg"])
     with pytest.raises(InputError, match="nowhere"):
         load_any(tmp_path / "nowhere")
+
+
+def test_explicit_files_are_used_as_given(tmp_path):
+    """Files the user names are one capture of exactly those files: a dataset's naming names the views, never
+    groups or completes them (a UWA group without frame 1 is still three views)."""
+    uwa = make_uwa(tmp_path / "uwa", groups=(("1", "1", "2"), ("1", "1", "3")))
+    (capture,) = load_any([uwa / "1_1_2_2.jpg", uwa / "1_1_2_0.jpg", uwa / "1_1_2_3.jpg"])
+    assert capture.names == ["f2", "f0", "f3"]  # the order given, named by frame
+    assert capture.metadata["dataset"] == "uwa" and capture.metadata["name"] == "1_1_2"
+    assert capture.metadata["sources"]["f0"].endswith("1_1_2_0.jpg")
+    assert capture.metadata["lighting"] == {"f2": "plain", "f0": "plain", "f3": "structured"}
+    mixed = load_any([uwa / "1_1_2_0.jpg", uwa / "1_1_3_1.jpg"])[0]  # two captures' frames: plain names
+    assert mixed.names == ["1_1_2_0", "1_1_3_1"] and mixed.metadata["dataset"] == "images"
+    cfpose = make_cfpose(tmp_path / "cfpose", fingers=("7",), poses=range(1, 5))
+    (poses,) = load_any([cfpose / "7_4.bmp", cfpose / "7_1.png"])
+    assert poses.names == ["p4", "p1"] and poses.metadata["poses"] == [4, 1]
+    with pytest.raises(InputError, match="missing frame 1"):  # a folder is a dataset: its groups must be whole
+        (tmp_path / "uwa" / "1_1_3_1.jpg").unlink()
+        load_any(uwa)

@@ -28,21 +28,22 @@ import json
 import math
 import re
 import shutil
+import warnings
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError, input_error
-from ..scene import Capture, View
-from .jsonio import read_json
-from .ply import write_mesh_ply
 from ..atomic import atomic_dir
+from ..errors import InputError, InputNote, input_error
+from ..scene import Capture, View
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
 from .images import IMAGE_SUFFIXES, read_image, read_mask, write_image, write_mask
+from .jsonio import read_json
 from .minutiae import write_minutiae
+from .ply import write_mesh_ply
 
 __all__ = ["CAPTURE_FORMAT", "CAPTURE_VERSION", "CaptureFiles", "capture_files", "is_capture_folder",
            "read_capture", "write_capture", "to_jsonable"]
@@ -98,10 +99,39 @@ def to_jsonable(value: Any, where: str = "metadata") -> Any:
     raise TypeError(f"{where}: cannot store a {type(value).__name__} in JSON")
 
 
+def _foreign(data: Any) -> bool:
+    """A JSON ``manifest.json`` that another tool wrote (a dataset's own, say): not a capture manifest."""
+    return not isinstance(data, dict) or "format" not in data or (
+        isinstance(data["format"], str) and not data["format"].startswith("fingersplat3d"))
+
+
+def _own_manifest(folder: Path) -> dict[str, Any] | None:
+    """The capture manifest of ``folder``, or None where there is none or it is another tool's (noted)."""
+    path = folder / MANIFEST
+    if not path.is_file():
+        return None
+    data = read_json(path)
+    if _foreign(data):
+        what = f'"format" {data["format"]!r}' if isinstance(data, dict) and "format" in data else "no \"format\""
+        warnings.warn(f"{path}: not a fingersplat3d capture manifest ({what}); ignored, the views are read from "
+                      f"images/", InputNote, stacklevel=3)
+        return None
+    return data
+
+
 def is_capture_folder(path: str | Path) -> bool:
-    """True for a folder that holds ``manifest.json`` or an ``images/`` folder."""
+    """True for a folder that holds an ``images/`` folder or a capture ``manifest.json`` (not another tool's)."""
     path = Path(path)
-    return path.is_dir() and ((path / MANIFEST).is_file() or (path / "images").is_dir())
+    if not path.is_dir():
+        return False
+    if (path / "images").is_dir():
+        return True
+    if not (path / MANIFEST).is_file():
+        return False
+    try:
+        return not _foreign(json.loads((path / MANIFEST).read_text(encoding="utf-8")))
+    except (OSError, ValueError):
+        return True  # ours but unreadable: reading it says why
 
 
 # ----------------------------------------------------------------------------------------- writing
@@ -206,11 +236,8 @@ def _relative(folder: Path, manifest: Path, value: Any, where: str) -> Path:
     return folder / relative
 
 
-def _parse_manifest(folder: Path, path: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
-    """Views, ``files`` and ``metadata`` of a validated manifest."""
-    data = read_json(path)
-    if not isinstance(data, dict):
-        raise input_error(path, "manifest must be a JSON object")
+def _parse_manifest(folder: Path, path: Path, data: dict[str, Any]) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+    """Views, ``files`` and ``metadata`` of a validated manifest (``data``, read from ``path``)."""
     if data.get("format") != CAPTURE_FORMAT:
         raise input_error(path, f'not a capture manifest ("format" is {data.get("format")!r}, '
                                 f'expected {CAPTURE_FORMAT!r})')
@@ -271,8 +298,9 @@ def capture_files(folder: str | Path) -> CaptureFiles:
         raise input_error(folder, "not a folder (a capture folder with images/ is expected)")
     images_dir = folder / "images"
     manifest = folder / MANIFEST
-    if manifest.is_file():
-        views, listed, metadata = _parse_manifest(folder, manifest)
+    data = _own_manifest(folder)
+    if data is not None:
+        views, listed, metadata = _parse_manifest(folder, manifest, data)
         if not images_dir.is_dir() and not listed["images"]:
             raise input_error(folder, "capture folder has no images/ folder")
     else:

@@ -21,7 +21,7 @@ mistaken for views). Names are sorted naturally (``img2`` before ``img10``).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -273,13 +273,43 @@ def _kind_of(files: Sequence[Path]) -> str:
     return "images"
 
 
+def _files_as_given(files: list[Path], gray: bool | None) -> Capture:
+    """Image files the user named: one capture of exactly those files, in the order given.
+
+    A dataset's naming never groups or completes them (that is for folders); it only names the
+    views and fills the metadata when every file is a frame of one UWA capture (views ``f<frame>``)
+    or a pose of one CFPose finger (views ``p<pose>``).
+    """
+    capture = load_image_folder(files, gray=gray)
+    uwa = [_UWA_NAME.match(path.stem) for path in files]
+    cfpose = [_CFPOSE_NAME.match(path.stem) for path in files]
+    if all(uwa) and len({(m["subject"], m["finger"], m["capture"], m["session"]) for m in uwa}) == 1 \
+            and len({int(m["frame"]) for m in uwa}) == len(files):
+        first = uwa[0]
+        names = [f"f{int(m['frame'])}" for m in uwa]
+        stem = "_".join(first[key] for key in ("subject", "finger", "capture", "session") if first[key] is not None)
+        metadata = {"dataset": "uwa", "subject": first["subject"], "finger": first["finger"],
+                    "capture": first["capture"], "session": first["session"], "name": stem,
+                    "lighting": {name: "plain" if int(m["frame"]) in UWA_VIEW_FRAMES else "structured"
+                                 for name, m in zip(names, uwa)}}
+    elif all(cfpose) and len({m["finger"] for m in cfpose}) == 1 and len({int(m["pose"]) for m in cfpose}) == len(files):
+        names = [f"p{int(m['pose'])}" for m in cfpose]
+        metadata = {"dataset": "cfpose", "finger": cfpose[0]["finger"], "poses": [int(m["pose"]) for m in cfpose]}
+    else:
+        return capture
+    views = tuple(replace(view, name=name) for view, name in zip(capture.views, names))
+    return Capture(views, {**metadata, "sources": {name: str(path) for name, path in zip(names, files)}})
+
+
 def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = None) -> list[Capture]:
     """Load whatever ``paths`` is, always as a list of captures.
 
     * a capture folder (``manifest.json`` or ``images/``) -> :func:`read_capture`;
-    * a folder (or list of files) whose images are *all* named like UWA frames -> :func:`load_uwa`;
+    * a folder whose images are *all* named like UWA frames -> :func:`load_uwa`;
     * ... all named like CFPose images -> :func:`load_cfpose`;
-    * any other folder of images or list of image files -> :func:`load_image_folder`;
+    * any other folder of images -> :func:`load_image_folder`;
+    * a list of image files -> one capture of exactly those files in the given order (a dataset's
+      naming only names their views, never groups or completes them);
     * a list of folders -> each one loaded as above, results concatenated.
 
     Only the folder's own files decide (no recursion); mask files are not counted.
@@ -306,7 +336,7 @@ def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = No
             return [capture for folder in folders for capture in load_any(folder, gray=gray)]
         if folders:
             raise input_error(folders[0], "is a folder; give either folders or image files, not both")
-        files, path = items, items
+        return [_files_as_given(items, gray)]
     kind = _kind_of(files)
     if kind == "uwa":
         return load_uwa(path, gray=gray)
