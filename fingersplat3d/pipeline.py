@@ -18,10 +18,10 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from . import __version__
-from .align.global_opt import GlobalAlignment, global_align
-from .align.icp import ICPConfig, refine_poses
+from .align.solve.global_opt import GlobalAlignment, global_align
+from .align.solve.icp import ICPConfig, refine_poses
 from .align.register import RegistrationConfig, register_views
-from .align.rig import Rig, RigCapture
+from .align.solve.rig import Rig, RigCapture
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
@@ -173,7 +173,7 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
     if rig is not None:
         raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "
                          "do not take one")
-    from .align.pointmap_pairs import register_pointmap_pair
+    from .align.solve.pointmap_pairs import register_pointmap_pair
 
     rng = np.random.default_rng(config.registration.seed)
     registered, records = [], []
@@ -204,7 +204,7 @@ def _check_rig(capture: Capture, rig: Rig) -> None:
 
 def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Rig | None = None) -> RigCapture:
     """A capture up to its registration (masks, pointmaps, correspondences, its own alignment): what a
-    rig calibration (:func:`~fingersplat3d.align.rig.calibrate_rig`) pools. With ``rig``, the
+    rig calibration (:func:`~fingersplat3d.align.solve.rig.calibrate_rig`) pools. With ``rig``, the
     guided matching runs through that rig's model (a calibration's re-matching round)."""
     config = FuseConfig() if config is None else config
     if rig is not None:
@@ -307,7 +307,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
     """Recover cameras and one fused finger surface from the capture's images (cameras ignored), and
     fit Gaussians to the photos on top (``config.splat``).
 
-    ``rig``: a calibrated rig (:mod:`fingersplat3d.align.rig`) whose poses and focal stay fixed; the
+    ``rig``: a calibrated rig (:mod:`fingersplat3d.align.solve.rig`) whose poses and focal stay fixed; the
     capture's views are its cameras in order.
 
     Views that could not be registered do not raise: the result says so

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.align.chart import CylinderChart
-from fingersplat3d.align.chart_shift import estimate_chart_shift
-from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+from fingersplat3d.align.correspond.chart import CylinderChart
+from fingersplat3d.align.correspond.chart_shift import estimate_chart_shift
+from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 from fingersplat3d.eval.poses import rotation_angle_deg
 from fingersplat3d.synth import SynthConfig, synthesize
 

@@ -1,7 +1,7 @@
 """Cubic B-spline depth-correction fields: partition of unity, dense = sparse, bending of a plane is zero."""
 import numpy as np
 
-from fingersplat3d.align.depth_field import FieldGrid
+from fingersplat3d.align.solve.depth_field import FieldGrid
 
 
 def grid():

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.align.epipolar import fundamental_inliers, sampson_distance
+from fingersplat3d.align.correspond.epipolar import fundamental_inliers, sampson_distance
 
 
 @pytest.mark.parametrize("uv_a, uv_b", [

@@ -8,8 +8,8 @@ left-center pair gives 35 matches, median 0.7 px.
 import numpy as np
 import pytest
 
-from fingersplat3d.align.features import Matches, match_views
-from fingersplat3d.align.texture import estimate_ridge_period
+from fingersplat3d.align.correspond.features import Matches, match_views
+from fingersplat3d.align.correspond.texture import estimate_ridge_period
 from fingersplat3d.errors import InputError
 from fingersplat3d.synth import Appearance, SynthConfig, synthesize
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.align.texture import estimate_ridge_period
+from fingersplat3d.align.correspond.texture import estimate_ridge_period
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval.contact import MAX_SIZE, TARGET_PERIOD_PX, contact_like
 from fingersplat3d.eval.verification import det_curve, equal_error_rate, error_rates, fnmr_at_fmr, fmr_resolution

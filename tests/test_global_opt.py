@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.align.global_opt import GlobalAlignConfig, PairCorrespondences, global_align, spanning_tree
+from fingersplat3d.align.solve.global_opt import GlobalAlignConfig, PairCorrespondences, global_align, spanning_tree
 from fingersplat3d.eval import relative_rotation_errors
 from fingersplat3d.synth import SynthConfig, synthesize
 

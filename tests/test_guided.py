@@ -3,8 +3,8 @@ import cv2
 import numpy as np
 import pytest
 
-from fingersplat3d.align.guided import match_guided, predict_with_jacobian, structure_information
-from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+from fingersplat3d.align.correspond.guided import match_guided, predict_with_jacobian, structure_information
+from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 
 LINEAR = np.array([[0.9, 0.15], [-0.1, 0.8]])
 OFFSET = np.array([20.0, 30.0])

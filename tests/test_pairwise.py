@@ -7,8 +7,8 @@ cross-section) it degrades to 10..11 degrees.
 import numpy as np
 import pytest
 
-from fingersplat3d.align.features import Matches, match_views
-from fingersplat3d.align.pairwise import PairRegistration, register_pair, sample_pointmap
+from fingersplat3d.align.correspond.features import Matches, match_views
+from fingersplat3d.align.solve.pairwise import PairRegistration, register_pair, sample_pointmap
 from fingersplat3d.errors import InputError
 from fingersplat3d.pointmaps.base import Pointmap
 from fingersplat3d.synth import Appearance, SynthConfig, synthesize

@@ -4,8 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fingersplat3d.align.global_opt import GlobalAlignConfig, global_align
-from fingersplat3d.align.pointmap_pairs import register_pointmap_pair
+from fingersplat3d.align.solve.global_opt import GlobalAlignConfig, global_align
+from fingersplat3d.align.solve.pointmap_pairs import register_pointmap_pair
 from fingersplat3d.eval import relative_rotation_errors
 from fingersplat3d.io import read_capture
 from fingersplat3d.pipeline import FuseConfig, fuse

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fingersplat3d.align.procrustes import NoConsensusError, Similarity, ransac_similarity, umeyama
+from fingersplat3d.align.solve.procrustes import NoConsensusError, Similarity, ransac_similarity, umeyama
 from fingersplat3d.errors import InputError
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fingersplat3d.align.register import register_views
-from fingersplat3d.align.rig import Rig, calibrate_rig, quarter_turn, robust_rotation_mean
+from fingersplat3d.align.solve.rig import Rig, calibrate_rig, quarter_turn, robust_rotation_mean
 from fingersplat3d.cli import main
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval.poses import rotation_angle_deg

@@ -1,7 +1,7 @@
 """Ridge texture: the period from the ridge area only, glints removed, a band-pass without halos."""
 import numpy as np
 
-from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture, suppress_glints
+from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture, suppress_glints
 
 
 def striped_finger(period_tip=8.0, period_body=20.0, rows=160, cols=480, radius=50):

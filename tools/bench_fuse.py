@@ -134,9 +134,9 @@ def run_fuse_worker(key: str, seeds: list[int], folder: Path) -> dict:
     import torch  # noqa: F401
     import tqdm  # noqa: F401
 
-    import fingersplat3d.align.features  # noqa: F401
-    import fingersplat3d.align.icp  # noqa: F401
-    import fingersplat3d.align.pairwise  # noqa: F401
+    import fingersplat3d.align.correspond.features  # noqa: F401
+    import fingersplat3d.align.solve.icp  # noqa: F401
+    import fingersplat3d.align.solve.pairwise  # noqa: F401
     import fingersplat3d.segment.masks  # noqa: F401
     from fingersplat3d.eval import depth_errors, relative_rotation_errors, translation_direction_errors
     from fingersplat3d.eval.poses import view_pairs

@@ -1,4 +1,4 @@
-"""Benchmark image matching (``align.features``) and pair registration (``align.pairwise``).
+"""Benchmark image matching (``align.correspond.features``) and pair registration (``align.solve.pairwise``).
 
     python tools/bench_matching.py [--seeds 3] [--out FILE.md] [--quick] [--methods minutiae,sift]
 
@@ -32,8 +32,8 @@ from collections import defaultdict
 import cv2
 import numpy as np
 
-from fingersplat3d.align.features import DEFAULT_METHOD, match_views
-from fingersplat3d.align.pairwise import register_pair
+from fingersplat3d.align.correspond.features import DEFAULT_METHOD, match_views
+from fingersplat3d.align.solve.pairwise import register_pair
 from fingersplat3d.pointmaps.base import Pointmap
 from fingersplat3d.synth import SynthConfig, synthesize
 

@@ -94,7 +94,7 @@ def _leave_one_out(capture, three, two) -> dict:
 def texture_check(two, camera2, view2) -> dict:
     """The two-view model (frames 0, 1) seen from ``camera2``: share of its surface outside frame 2's
     mask, and the correlation of its ridge texture with frame 2's."""
-    from fingersplat3d.align.texture import estimate_ridge_period, ridge_texture
+    from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 
     period = estimate_ridge_period(view2.image, view2.mask)
     target = ridge_texture(view2.image, view2.mask, period)

@@ -47,7 +47,7 @@ def _rig_difference(a, b) -> list[float]:
 
 def _rig_camera2(two, rig, view2):
     """Camera 2 of ``rig`` in the frame of a two-view reconstruction on the rig's cameras 0 and 1."""
-    from fingersplat3d.align.rig import quarter_turn
+    from fingersplat3d.align.solve.rig import quarter_turn
     from fingersplat3d.eval.poses import rotation_angle_deg
     from fingersplat3d.scene import Camera
 
@@ -61,8 +61,8 @@ def _rig_camera2(two, rig, view2):
 
 
 def real(data: Path) -> dict:
-    from fingersplat3d.align.global_opt import GlobalAlignConfig
-    from fingersplat3d.align.rig import calibrate_rig
+    from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
+    from fingersplat3d.align.solve.rig import calibrate_rig
     from fingersplat3d.io.jobs import list_jobs, load_job
     from fingersplat3d.pipeline import FuseConfig, fuse, register_capture
     from fingersplat3d.scene import Capture
@@ -106,13 +106,13 @@ def real(data: Path) -> dict:
 
 
 def synthetic(seeds: int) -> dict:
-    from fingersplat3d.align.rig import calibrate_rig
+    from fingersplat3d.align.solve.rig import calibrate_rig
     from fingersplat3d.eval import depth_errors, relative_rotation_errors
     from fingersplat3d.eval.poses import rotation_angle_deg
     from fingersplat3d.pipeline import FuseConfig, fuse, register_capture
     from fingersplat3d.scene import Capture
     from fingersplat3d.synth import SynthConfig, synthesize
-    from fingersplat3d.align.global_opt import GlobalAlignConfig
+    from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
 
     config = FuseConfig(splat=None)
     truths = [synthesize(seed, SynthConfig(size=(640, 512))).capture for seed in range(seeds)]

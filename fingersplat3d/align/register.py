@@ -4,17 +4,17 @@ The loop (all numbers scale with the measured ridge period):
 
 1. **first guess of each pair** (``matcher='surface'``, the default): both views' ridge textures
    unwrapped on their cylinder charts, their shift voted by patches
-   (:mod:`~fingersplat3d.align.chart_shift`), and guided matching through the charts with a
-   search of two ridge periods (:mod:`~fingersplat3d.align.guided`); the classic matchers
-   (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.features` can stand in for it;
-2. **verification**: a robust fundamental matrix (:mod:`~fingersplat3d.align.epipolar`); a
+   (:mod:`~fingersplat3d.align.correspond.chart_shift`), and guided matching through the charts with a
+   search of two ridge periods (:mod:`~fingersplat3d.align.correspond.guided`); the classic matchers
+   (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.correspond.features` can stand in for it;
+2. **verification**: a robust fundamental matrix (:mod:`~fingersplat3d.align.correspond.epipolar`); a
    pair is registered when at least ``min_matches`` correspondences agree with it, and its
    similarity ``b_to_a`` comes from the two pointmaps at the matched pixels
-   (:func:`~fingersplat3d.align.pairwise.register_pair`);
+   (:func:`~fingersplat3d.align.solve.pairwise.register_pair`);
 3. **global alignment** of all registered pairs from their maximum spanning tree
-   (:func:`~fingersplat3d.align.global_opt.global_align`);
+   (:func:`~fingersplat3d.align.solve.global_opt.global_align`);
 4. **guided rounds**: every pair of aligned views is matched again, predicted through the 3D
-   model (:class:`~fingersplat3d.align.model_predictor.ModelPredictor`) with a search of
+   model (:class:`~fingersplat3d.align.correspond.model_predictor.ModelPredictor`) with a search of
    ``guided_search`` periods (pairs that had no first guess, such as views 90 degrees apart, get
    one now), verified, and the alignment is refined from where it stands. The model's error
    shrinks each round, so the matches come closer to the truth and cover more of the overlap.
@@ -31,14 +31,14 @@ import numpy as np
 
 from ..pointmaps.base import Pointmap
 from ..scene import View
-from .chart import CylinderChart
-from .chart_shift import ChartPredictor, estimate_chart_shift
-from .epipolar import fundamental_inliers
-from .global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
-from .guided import GuidedMatches, match_guided
-from .model_predictor import ModelPredictor
-from .rig import Rig, rig_align
-from .texture import as_gray, estimate_ridge_period, ridge_texture
+from .correspond.chart import CylinderChart
+from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
+from .correspond.epipolar import fundamental_inliers
+from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .correspond.guided import GuidedMatches, match_guided
+from .correspond.model_predictor import ModelPredictor
+from .solve.rig import Rig, rig_align
+from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
 
@@ -51,7 +51,7 @@ class RegistrationConfig:
 
     matcher: str = "surface"
     """First guess of each pair: ``surface`` (cylinder charts + guided ridge matching) or a classic
-    matcher of :mod:`fingersplat3d.align.features` (``minutiae``, ``sift``, ``rootsift``, ``akaze``)."""
+    matcher of :mod:`fingersplat3d.align.correspond.features` (``minutiae``, ``sift``, ``rootsift``, ``akaze``)."""
     guided_rounds: int = 2
     """Rounds of model-guided matching and refinement after the first alignment (0 = none)."""
     first_search: float = 2.0
@@ -122,7 +122,7 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
 
 
 def _classic_guess(prepared: _Prepared, a: int, b: int, config: RegistrationConfig) -> GuidedMatches:
-    from .features import match_views
+    from .correspond.features import match_views
 
     matches = match_views(prepared.grays[a], prepared.masks[a], prepared.grays[b], prepared.masks[b],
                           method=config.matcher, densify=config.matcher == "minutiae", period_px=prepared.period)
@@ -141,11 +141,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
 
     ``pairs``: the view pairs to try (default: all ``a < b``). ``progress``: an optional callable
     taking a short text, told what the loop is doing. ``rig``: a calibrated rig
-    (:mod:`~fingersplat3d.align.rig`) whose camera poses and focal are kept fixed; the views are
+    (:mod:`~fingersplat3d.align.solve.rig`) whose camera poses and focal are kept fixed; the views are
     its cameras in order.
     """
-    from .pairwise import register_pair
-    from .features import Matches
+    from .solve.pairwise import register_pair
+    from .correspond.features import Matches
 
     say = progress or (lambda text: None)
     n_views = len(views)

@@ -34,7 +34,7 @@ class BatchOptions:
 
     fuse: object  # pipeline.FuseConfig (splat None = geometry only)
     render: int = 12  # novel views on the arc (0 = none; needs the splat)
-    rig: object | None = None  # align.rig.Rig, fixed poses
+    rig: object | None = None  # align.solve.rig.Rig, fixed poses
     threads: int = 1  # torch threads in the worker
     force: bool = False  # redo a complete capture
 

@@ -10,7 +10,7 @@ from ..errors import EXIT_INCOMPLETE, InputError
 from .options import add_dataset_arguments, add_splat_arguments, fuse_config, read_rig
 from .types import number
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

@@ -10,7 +10,7 @@ from ..splat.config import PRESETS
 from .common import finished
 from .types import size
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..errors import EXIT_INCOMPLETE, InputError
 
-__all__ = ['finished', 'nbis_needed', 'named_captures']
+__all__ = ["finished", "nbis_needed", "named_captures"]
 
 
 def finished(command: str, failed: int, total: int, what: str, output: Path) -> int:

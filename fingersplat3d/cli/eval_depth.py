@@ -10,7 +10,7 @@ from ..atomic import atomic_dir, check_free
 from ..errors import InputError
 from .common import finished
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(actions) -> None:

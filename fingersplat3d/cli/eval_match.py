@@ -10,7 +10,7 @@ from ..errors import EXIT_INCOMPLETE, InputError
 from .common import finished, nbis_needed
 from .types import angle_list
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(actions) -> None:

@@ -9,7 +9,7 @@ from ..atomic import atomic_dir, check_free
 from ..splat.config import PRESETS, preset
 from .common import finished, named_captures, nbis_needed
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(actions) -> None:

@@ -10,7 +10,7 @@ from ..errors import InputError
 from .common import finished, nbis_needed
 from .types import view_pairs
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(actions) -> None:

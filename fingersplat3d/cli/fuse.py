@@ -6,19 +6,14 @@ import sys
 import time
 from pathlib import Path
 
-from ..align.global_opt import GlobalAlignConfig
 from ..align.register import RegistrationConfig
+from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
-from .options import (
-    add_registration_arguments,
-    add_splat_arguments,
-    read_rig,
-    splat_config,
-)
+from .options import add_registration_arguments, add_splat_arguments, read_rig, splat_config
 from .types import COUNT, POSITIVE, STEPS
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ['add', 'run', 'describe']
+__all__ = ["add", "run", "describe"]
 
 
 def add(commands) -> None:

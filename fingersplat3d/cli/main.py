@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from .. import __version__
-from ..errors import EXIT_INPUT, FS3DError
+from ..errors import EXIT_INPUT, FS3DError, InputNote
 from . import (
     batch,
     bench,
@@ -59,6 +60,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _note_printer(command: str):
+    """``warnings.showwarning`` that prints an :class:`InputNote` as one line, once (a file read twice gives the
+    same note twice), other warnings as Python does."""
+    default, shown = warnings.showwarning, set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, InputNote):
+            if str(message) not in shown:
+                shown.add(str(message))
+                print(f"fs3d {command}: note: {message}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -68,7 +84,10 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_INPUT
         raise
     try:
-        return args.run(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", InputNote)
+            warnings.showwarning = _note_printer(args.command)
+            return args.run(args)
     except (FS3DError, FileExistsError, FileNotFoundError) as error:
         print(f"fs3d {args.command}: error: {error}", file=sys.stderr)
         return EXIT_INPUT

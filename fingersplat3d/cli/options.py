@@ -8,7 +8,7 @@ from ..align.register import MATCHERS, RegistrationConfig
 from ..splat.config import DEFAULT_PRESET, PRESETS, preset
 from .types import COUNT, POSITIVE, STEPS
 
-__all__ = ['add_registration_arguments', 'add_splat_arguments', 'add_dataset_arguments', 'splat_config', 'fuse_config', 'read_rig']
+__all__ = ["add_registration_arguments", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "read_rig"]
 
 
 def add_registration_arguments(parser) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .types import number
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

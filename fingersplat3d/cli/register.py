@@ -7,7 +7,7 @@ from pathlib import Path
 from ..atomic import atomic_dir
 from ..errors import InputError
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

@@ -9,7 +9,7 @@ from ..atomic import check_free
 from ..errors import InputError
 from .types import angles, number
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

@@ -7,13 +7,13 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from ..align.global_opt import GlobalAlignConfig
+from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
 from .options import add_dataset_arguments, fuse_config
 from .types import number
 
-__all__ = ['add', 'run', 'register_job']
+__all__ = ["add", "run", "register_job"]
 
 
 def add(commands) -> None:
@@ -36,7 +36,7 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..align.rig import calibrate_rig
+    from ..align.solve.rig import calibrate_rig
     from ..batch.engine import ray_map
     from ..io.jobs import list_jobs
     from ..io.rig import write_rig

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..atomic import check_free
 from .types import COUNT, POSITIVE, angles, size
 
-__all__ = ['add', 'run']
+__all__ = ["add", "run"]
 
 
 def add(commands) -> None:

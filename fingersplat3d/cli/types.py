@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ['size', 'angles', 'number', 'COUNT', 'STEPS', 'POSITIVE', 'angle_list', 'view_pairs']
+__all__ = ["size", "angles", "number", "COUNT", "STEPS", "POSITIVE", "angle_list", "view_pairs"]
 
 
 def size(text: str) -> tuple[int, int]:

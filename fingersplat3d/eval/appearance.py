@@ -6,7 +6,7 @@
   deviation (1.4826 MAD) of the background away from the finger;
 * ``ridge_contrast``: RMS of the ridge band (difference of Gaussians around the ridge period) in the
   finger's core, over the skin level: how visible the ridges are;
-* ``ridge_period_px``: :func:`~fingersplat3d.align.texture.estimate_ridge_period`;
+* ``ridge_period_px``: :func:`~fingersplat3d.align.correspond.texture.estimate_ridge_period`;
 * ``edge_blur_px``: the Gaussian sigma that explains the silhouette's edge, from the steepest
   gradient across it, ``sigma = step / (sqrt(2 pi) * max |grad|)`` (median along the outline;
   includes the skin darkening toward the rim, so it is an upper bound of the optics' blur);
@@ -14,7 +14,7 @@
   intensity in the core (beyond 25 %): below 1 when the sides are darker;
 * ``width_fraction``: median finger width across its axis over the image's short side;
 * ``glints``: share of finger pixels that are specular specks
-  (:func:`~fingersplat3d.align.texture.suppress_glints`'s test).
+  (:func:`~fingersplat3d.align.correspond.texture.suppress_glints`'s test).
 
 Pure numpy/OpenCV.
 """
@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from ..align.texture import as_gray, estimate_ridge_period, suppress_glints
+from ..align.correspond.texture import as_gray, estimate_ridge_period, suppress_glints
 from ..segment.silhouette import silhouette_frame
 
 __all__ = ["ImageStatistics", "image_statistics"]

@@ -5,9 +5,9 @@ background, fingertip up, 197-799 px wide and 197-999 px tall after white border
 :func:`contact_like` converts a photo (or a render) and its finger mask:
 
 1. **Ridge area only**: the distal phalanx within ``RIDGE_AREA_WIDTHS`` finger widths of the tip
-   (:func:`~fingersplat3d.align.texture.ridge_area`); the rest of the finger and the background
+   (:func:`~fingersplat3d.align.correspond.texture.ridge_area`); the rest of the finger and the background
    become white.
-2. **Ridges dark**: the band-passed ridge texture (:func:`~fingersplat3d.align.texture.ridge_texture`,
+2. **Ridges dark**: the band-passed ridge texture (:func:`~fingersplat3d.align.correspond.texture.ridge_texture`,
    unit local RMS, so shading and exposure drop out) mapped to ``128 -+ 48 * texture``. Under the
    plain light of contactless rigs ridge crests are the bright lines (``ridges="bright"``, the
    default, inverts them); ``"dark"`` keeps the photo's polarity.
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..align.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
+from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
 from ..errors import InputError
 
 __all__ = ["ContactImage", "contact_like", "TARGET_PERIOD_PX", "MAX_SIZE", "MIN_SIDE"]

@@ -22,7 +22,7 @@ def rig_consistency(records: list[dict]) -> dict:
     """Per camera pair: each capture's deviation from the robust mean relative rotation (degrees)."""
     from scipy.spatial.transform import Rotation
 
-    from ..align.rig import quarter_turn, robust_rotation_mean
+    from ..align.solve.rig import quarter_turn, robust_rotation_mean
 
     usable = [r for r in records if r["registered"] == 3]
     if len(usable) < 2:

@@ -184,7 +184,7 @@ def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: "_Reconstruction",
     both as ridge texture (band-passed, unit local RMS) where both see the finger; the global shift
     between them by phase correlation (px; ~0 when the model carries A onto B) and their normalised
     correlation as they are (ridges in phase: well above 0; half a ridge period off: about 0)."""
-    from ..align.texture import as_gray, estimate_ridge_period, ridge_texture
+    from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_texture
     from ..align.transfer import warp_image
     from ..segment.masks import finger_mask
 

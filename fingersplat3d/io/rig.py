@@ -5,7 +5,7 @@ rig frame (camera 0's), units ``"arbitrary"`` (camera 0's median depth of the fi
 capture used = 1); ``image`` says which camera it is (``"camera f0"``). A top-level ``"rig"`` object
 records how it was calibrated (captures used and left out, residuals). Every camera has the same
 focal length and its principal point at the image centre (the model of
-:mod:`fingersplat3d.align.rig`); a file that breaks this is an ``InputError`` naming it.
+:mod:`fingersplat3d.align.solve.rig`); a file that breaks this is an ``InputError`` naming it.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..align.rig import Rig
+from ..align.solve.rig import Rig
 from ..errors import input_error
 from ..scene import Camera
 from .cameras import read_cameras, write_cameras

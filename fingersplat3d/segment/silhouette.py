@@ -11,7 +11,7 @@ straight axis, shrinking over the fingertip cap. Its silhouette is described by
   and ``w^2`` is fitted by local quadratics (no 1-px terraces; exact on an ellipsoidal cap).
 
 Used by the ``prior`` pointmap backend (relief from the chords) and by the cylinder charts of
-:mod:`fingersplat3d.align.chart` (surface coordinates from the chords). Pure numpy/scipy.
+:mod:`fingersplat3d.align.correspond.chart` (surface coordinates from the chords). Pure numpy/scipy.
 """
 from __future__ import annotations
 
@@ -140,7 +140,7 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15) -> SilhouetteFra
     both or neither touch, the end with the narrower chords is taken. The axis points to the tip
     (increasing ``s``). The sign of the
     axis fixes the sign of ``normal``, so two views of one finger from cameras turned about it get
-    frames that agree: their surface angles (:mod:`fingersplat3d.align.chart`) differ by the turn.
+    frames that agree: their surface angles (:mod:`fingersplat3d.align.correspond.chart`) differ by the turn.
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape

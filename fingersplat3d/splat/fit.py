@@ -80,7 +80,7 @@ def gaussian_budget(views: Sequence[View], config: SplatConfig) -> int:
     band, i.e. a spacing of a quarter period; the areas of the views' masks are summed and divided
     by ``view_overlap`` (how many views see an average skin point).
     """
-    from ..align.texture import estimate_ridge_period
+    from ..align.correspond.texture import estimate_ridge_period
 
     cells = 0.0
     for view in views:

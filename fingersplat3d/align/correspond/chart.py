@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..segment.silhouette import SilhouetteFrame, silhouette_frame
+from ...segment.silhouette import SilhouetteFrame, silhouette_frame
 
 __all__ = ["CylinderChart", "Unwrapped", "MAX_CHART_ANGLE"]
 

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 from .epipolar import fundamental_inliers, sampson_distance
 from .texture import as_gray, estimate_ridge_period, ridge_texture
 

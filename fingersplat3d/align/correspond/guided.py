@@ -27,7 +27,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..device import cpu_threads, single_threaded
+from ...device import cpu_threads, single_threaded
 
 __all__ = ["GuidedMatches", "Predictor", "predict_with_jacobian", "match_guided", "structure_information"]
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling import sample_bilinear
-from ..scene import Camera
+from ...sampling import sample_bilinear
+from ...scene import Camera
 
 __all__ = ["ModelPredictor"]
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ["as_gray", "estimate_ridge_period", "ridge_area", "suppress_glints", "ridge_texture", "DEFAULT_PERIOD_PX"]
 
@@ -114,7 +114,7 @@ def ridge_area(mask: np.ndarray) -> np.ndarray:
     behind it, skin creases and wrinkles have periods of their own that would outvote the ridges
     on a finger photographed far back. The whole mask when no tip is found (no border cuts one end).
     """
-    from ..segment.silhouette import silhouette_frame
+    from ...segment.silhouette import silhouette_frame
 
     if mask.all() or mask.sum() < 64:
         return mask

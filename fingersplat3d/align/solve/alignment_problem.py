@@ -28,7 +28,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from ..rotations import axis_angle_to_matrix
+from ...rotations import axis_angle_to_matrix
 from .depth_field import FieldGrid
 
 __all__ = ["Correspondences", "InitialState", "AlignmentProblem"]

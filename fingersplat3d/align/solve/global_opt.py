@@ -28,8 +28,8 @@ import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
 
-from ..device import single_threaded
-from ..sampling import sample_bilinear
+from ...device import single_threaded
+from ...sampling import sample_bilinear
 from .alignment_problem import AlignmentProblem, Correspondences, InitialState
 from .depth_field import FieldGrid
 from .optimize import minimize

@@ -25,9 +25,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import InputError
-from ..pointmaps.base import Pointmap
-from .features import Matches
+from ...errors import InputError
+from ...pointmaps.base import Pointmap
+from ..correspond.features import Matches
 from .procrustes import NoConsensusError, Similarity, ransac_similarity, umeyama
 
 __all__ = ["PairRegistration", "register_pair", "sample_pointmap", "DEFAULT_THRESHOLDS"]

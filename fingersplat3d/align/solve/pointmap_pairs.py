@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..pointmaps.base import PairPointmaps, Pointmap
+from ...errors import InputError
+from ...pointmaps.base import PairPointmaps, Pointmap
 from .global_opt import PairCorrespondences, weighted_median
 from .procrustes import Similarity, umeyama
 

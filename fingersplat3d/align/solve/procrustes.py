@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import FS3DError, InputError
+from ...errors import FS3DError, InputError
 
 __all__ = ["Similarity", "umeyama", "ransac_similarity", "NoConsensusError"]
 

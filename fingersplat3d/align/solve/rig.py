@@ -31,8 +31,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from ..device import single_threaded
-from ..rotations import axis_angle_to_matrix
+from ...device import single_threaded
+from ...rotations import axis_angle_to_matrix
 from .alignment_problem import InitialState
 from .global_opt import (GlobalAlignConfig, GlobalAlignment, PairCorrespondences, alignment_problem, alignment_result,
                          field_grids, reached, spanning_tree)
