@@ -1,6 +1,6 @@
 """Image matching between finger photos, checked against the synthetic ground truth.
 
-Bounds come from ``tools/bench_matching.py`` (uwa 640x512, seeds 0..9, default ``minutiae``
+Bounds were measured with a matcher benchmark (since folded away; git history) (uwa 640x512, seeds 0..9, default ``minutiae``
 method): a 45-degree pair that returns matches returns 12..46 of them, median ground-truth error
 0.4..0.9 px; 3 of 20 such pairs return none; every 90-degree pair returns none. Seed 0's
 left-center pair gives 35 matches, median 0.7 px.

@@ -1,6 +1,6 @@
 """Pair registration from matched pixels of two own-frame pointmaps, against the synthetic ground truth.
 
-Measured with ``tools/bench_matching.py`` (uwa 640x512): on pointmaps from the exact depth the
+Measured with a matcher benchmark (uwa 640x512; the script is in git history): on pointmaps from the exact depth the
 relative rotation comes out within 0.1..0.3 degrees; with the relief scaled 1.3x (a wrong
 cross-section) it degrades to 10..11 degrees.
 """

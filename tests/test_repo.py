@@ -108,3 +108,51 @@ def test_the_import_graph_has_no_circle():
     for module in sorted(graph):
         if module not in state:
             visit(module)
+
+
+def test_correspondences_sit_below_the_solvers():
+    """align.correspond finds correspondences; align.solve and align.register use them, never the other way."""
+    graph = _module_graph()
+    for module, targets in graph.items():
+        if module.startswith("fingersplat3d.align.correspond"):
+            upward = {t for t in targets if t.startswith(("fingersplat3d.align.solve", "fingersplat3d.align.register"))}
+            assert not upward, f"{module} imports {sorted(upward)}"
+
+
+def test_the_front_page_is_short_and_each_command_has_a_small_module():
+    readme = (ROOT / "README.md").read_text().splitlines()
+    assert len(readme) <= 250, f"README.md has {len(readme)} lines; tables and method notes belong in docs/"
+    for path in sorted((ROOT / "fingersplat3d" / "cli").glob("*.py")):
+        lines = len(path.read_text().splitlines())
+        assert lines <= 300, f"{path.name}: {lines} lines; one command per module, shared options in options.py"
+    from fingersplat3d.cli.main import COMMANDS, EVAL_ACTIONS
+
+    assert len(COMMANDS) + len(EVAL_ACTIONS) >= 11
+
+
+def _anchors(markdown: str) -> set[str]:
+    """GitHub's heading anchors: lower case, punctuation dropped, spaces to hyphens."""
+    import re
+
+    anchors = set()
+    for line in markdown.splitlines():
+        if line.startswith("#"):
+            text = line.lstrip("#").strip().lower()
+            anchors.add(re.sub(r"[^\w\- ]", "", text).replace(" ", "-"))
+    return anchors
+
+
+def test_every_link_of_the_readme_and_docs_resolves():
+    """Relative links (files, pictures, #anchors in other pages) point at something that exists."""
+    import re
+
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    for page in pages:
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+            if target.startswith(("http://", "https://", "mailto:")):
+                continue
+            path_part, _, anchor = target.partition("#")
+            resolved = (page.parent / path_part).resolve() if path_part else page
+            assert resolved.exists(), f"{page.name}: link to {target} points at nothing"
+            if anchor and resolved.suffix == ".md":
+                assert anchor in _anchors(resolved.read_text()), f"{page.name}: no heading for #{anchor} in {resolved.name}"

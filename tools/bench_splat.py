@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import pickle
-import resource
 import statistics
 import subprocess
 import sys
@@ -35,22 +34,11 @@ import time
 from pathlib import Path
 
 from fingersplat3d.eval.machine import machine
+from fingersplat3d.experiments.bench import HELD_OUT, synth_captures
+from fingersplat3d.experiments.geometry import RING_VIEWS
+from fingersplat3d.experiments.process import peak_rss_mb
 
-TRAIN = ("v0", "v2", "v4")
-HELD_OUT = {"v1": -22.5, "v3": 22.5}
-ANGLES = (-45.0, -22.5, 0.0, 22.5, 45.0)
-
-
-def synth_captures(seeds: list[int], folder: Path) -> list[Path]:
-    from fingersplat3d.synth import SynthConfig, synthesize
-
-    paths = []
-    for seed in seeds:
-        result = synthesize(seed, SynthConfig(rig="ring", angles=ANGLES, size=(640, 512)))
-        path = folder / f"seed{seed}.pkl"
-        path.write_bytes(pickle.dumps(result.capture))
-        paths.append(path)
-    return paths
+TRAIN = RING_VIEWS[3]
 
 
 def run_preset(preset_name: str, captures: list[str], overrides: dict) -> list[dict]:
@@ -97,7 +85,7 @@ def run_preset(preset_name: str, captures: list[str], overrides: dict) -> list[d
                           "psnr": masked_psnr(after.image, target.image, target.mask),
                           "ssim": masked_ssim(after.image, target.image, target.mask)}
         row["held_out"] = held
-        row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        row["peak_rss_mb"] = peak_rss_mb()
         rows.append(row)
         print(json.dumps({k: v for k, v in row.items()}, default=float), file=sys.stderr, flush=True)
     return rows
@@ -206,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.first_seed, args.first_seed + (1 if args.quick else args.seeds)))
     results = {}
     with tempfile.TemporaryDirectory() as folder:
-        captures = [str(p) for p in synth_captures(seeds, Path(folder))]
+        captures = [str(p) for p in synth_captures(seeds, Path(folder), (640, 512))]
         for name in args.presets.split(","):
             command = [sys.executable, __file__, "--worker", name, json.dumps(captures)]
             command += [f"--set={item}" for item in args.set] + (["--bound"] if args.bound else [])

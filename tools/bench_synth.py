@@ -30,7 +30,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
 from fingersplat3d.eval.machine import machine
+from fingersplat3d.experiments.process import peak_rss_mb
 
 RIG_SPECS = {
     # key: (label, SynthConfig keyword arguments, image-minutiae match test?)
@@ -169,10 +171,6 @@ def match_minutiae(result) -> dict:
 # Worker: one rig, all seeds, in its own process
 # ----------------------------------------------------------------------------------------------
 
-def peak_rss_mib() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
-
-
 def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
     clock = time.perf_counter()
     import numpy as np
@@ -182,7 +180,7 @@ def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
     from fingersplat3d.synth import Appearance, SynthConfig, synthesize
     from fingersplat3d.synth.render import skin_weight
     import_s = time.perf_counter() - clock
-    rss_after_import = peak_rss_mib()
+    rss_after_import = peak_rss_mb()
 
     label, kwargs, _ = RIG_SPECS[key]
     if kwargs["rig"] == "cfpose":
@@ -205,7 +203,7 @@ def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
             written_mb = sum(p.stat().st_size for p in Path(tmp).rglob("*") if p.is_file()) / 2**20
         record = {"seed": seed, "load1": load, "synth_s": synth_s, "write_s": write_s,
                   "total_s": synth_s + write_s, "cpu_s": cpu_s, "stages": dict(result.seconds), "written_mib": written_mb,
-                  "peak_rss_mib": peak_rss_mib()}
+                  "peak_rss_mib": peak_rss_mb()}
 
         # --- sample statistics (off the clock) ---
         views = result.capture.views
@@ -248,7 +246,7 @@ def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
         })
         records.append(record)
         del result, rendering, frontal, views
-    peak_timing = peak_rss_mib()
+    peak_timing = peak_rss_mb()
 
     match_records = []
     if match:
@@ -259,7 +257,7 @@ def run_worker(key: str, seeds: list[int], poses: int, match: bool) -> dict:
             del result
     return {"key": key, "label": label, "import_s": import_s,
             "rss_after_import_mib": rss_after_import, "peak_rss_mib": peak_timing,
-            "peak_rss_with_match_mib": peak_rss_mib(), "records": records, "match": match_records,
+            "peak_rss_with_match_mib": peak_rss_mb(), "records": records, "match": match_records,
             "poses": poses if kwargs["rig"] == "cfpose" else None}
 
 

@@ -23,21 +23,18 @@ Writes ``bench.csv``, ``summary.md`` (tables, machine named) and ``trade_depth.p
 """
 from __future__ import annotations
 
-import multiprocessing
-import resource
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .geometry import RING_ANGLES, RING_VIEWS, score_geometry
+from .process import in_fresh_process, peak_rss_mb
 from .tables import write_rows
 
 __all__ = ["Setting", "sweep", "run_bench", "RING_ANGLES"]
 
-RING_ANGLES = (-45.0, -22.5, 0.0, 22.5, 45.0)
-VIEW_SETS = {2: ("v0", "v2"), 3: ("v0", "v2", "v4"), 5: ("v0", "v1", "v2", "v3", "v4")}
 HELD_OUT = {"v1": -22.5, "v3": 22.5}
 STAGES = ("pointmaps", "registration", "icp", "fusion", "splat")
 
@@ -96,17 +93,11 @@ def _resized(view, scale: float):
     return view.with_(image=image, mask=mask, depth=depth, camera=camera)
 
 
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def run_synthetic(setting: Setting, capture_path: str, device: str = "auto") -> dict:
     """One fuse of one synthetic capture under ``setting`` (runs in its own process)."""
     import pickle
 
-    from ..eval import depth_errors
     from ..eval.image import masked_psnr
-    from ..eval.poses import relative_rotation_errors
     from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
     from ..splat.camera_path import cameras_at_angles
@@ -116,7 +107,7 @@ def run_synthetic(setting: Setting, capture_path: str, device: str = "auto") -> 
 
     capture = pickle.loads(Path(capture_path).read_bytes())
     views = {view.name: _resized(view, setting.scale) for view in capture.views}
-    names = VIEW_SETS[setting.views]
+    names = RING_VIEWS[setting.views]
     blind = Capture(tuple(views[n].with_(camera=None, depth=None) for n in names), capture.metadata)
     overrides = {k: v for k, v in (("iterations", setting.iterations), ("gaussians_per_cell", setting.gaussians_per_cell))
                  if v is not None}
@@ -128,10 +119,8 @@ def run_synthetic(setting: Setting, capture_path: str, device: str = "auto") -> 
            "views_fused": len(names), "gaussians": len(result.gaussians) if result.gaussians is not None else 0}
     for stage in STAGES:
         row[f"{stage}_s"] = result.report["stages"].get(stage, {}).get("seconds", 0.0)
-    row["depth_mae_mm"] = float(np.mean([depth_errors(d, views[n].depth, views[n].mask).mae
-                                         for n, d in zip(names, result.depths)]))
-    row["rotation_error_deg"] = float(np.mean(relative_rotation_errors(
-        [c.world_to_cam for c in result.cameras], [views[n].camera.world_to_cam for n in names])))
+    scores = score_geometry(result, {n: views[n] for n in names})
+    row.update(depth_mae_mm=scores["depth_mae_mm"], rotation_error_deg=scores["rotation_mean_deg"])
     held = [n for n in HELD_OUT if n not in names]
     psnrs = []
     if held and result.gaussians is not None:
@@ -142,39 +131,19 @@ def run_synthetic(setting: Setting, capture_path: str, device: str = "auto") -> 
             aligned = fit_camera(result.gaussians, placed, target.image, target.mask)
             psnrs.append(masked_psnr(render_views(result.gaussians, [(name, aligned)])[0].image, target.image, target.mask))
     row["held_out_psnr_db"] = float(np.mean(psnrs)) if psnrs else float("nan")
-    row["peak_rss_mb"] = _peak_rss_mb()
+    row["peak_rss_mb"] = peak_rss_mb()
     return row
 
 
 def run_real(scale: float, data: str) -> dict:
     """Geometry-only fuses of every real capture at ``scale``: rig consistency (own process)."""
-    from ..eval.rig_consistency import rig_consistency
     from ..io.datasets import load_any
-    from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
+    from .real import measure_real, summarize_real
 
-    records, seconds = [], []
-    for capture in load_any(data):
-        capture = Capture(tuple(_resized(v, scale) for v in capture.views), capture.metadata)
-        started = time.perf_counter()
-        result = fuse(capture, FuseConfig(splat=None))
-        seconds.append(time.perf_counter() - started)
-        records.append({"capture": capture.metadata.get("name", str(len(records))),
-                        "registered": int(sum(result.report["alignment"]["aligned"].values())),
-                        "sizes": [[v.width, v.height] for v in capture.views],
-                        "world_to_cam": [c.world_to_cam for c in result.cameras]})
-    pairs = rig_consistency(records) if all(len(r["sizes"]) == 3 for r in records) else {}
-    deviations = [d for pair in pairs.values() for d in pair["deviation_deg"].values()]
-    return {"captures": len(records), "registered_all": sum(r["registered"] == len(r["sizes"]) for r in records),
-            "rig_deviation_median_deg": float(np.median(deviations)) if deviations else float("nan"),
-            "rig_deviation_max_deg": float(np.max(deviations)) if deviations else float("nan"),
-            "fuse_s_median": float(np.median(seconds)) if seconds else float("nan"), "peak_rss_mb": _peak_rss_mb()}
-
-
-def _in_process(function, *args):
-    """``function(*args)`` in a fresh process (spawned: nothing inherited, its peak memory its own)."""
-    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(function, *args).result()
+    records = [measure_real(Capture(tuple(_resized(v, scale) for v in capture.views), capture.metadata))
+               for capture in load_any(data)]
+    return {k: v for k, v in summarize_real(records).items() if k != "rig"}
 
 
 def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int]) -> list[Path]:
@@ -207,7 +176,7 @@ def run_bench(settings: list[Setting], seeds: list[int], out: Path, *, size: tup
         for setting, seed, path in tqdm(jobs, desc="fs3d bench", unit="fuse", disable=not progress):
             row = {**asdict(setting), "seed": seed}
             try:
-                row.update(_in_process(run_synthetic, setting, str(path), device), status="done")
+                row.update(in_fresh_process(run_synthetic, setting, str(path), device), status="done")
             except Exception as error:  # a failed run is a row, not the end of the sweep
                 row.update(status="failed", reason=f"{type(error).__name__}: {error}")
             rows.append(row)
@@ -215,7 +184,7 @@ def run_bench(settings: list[Setting], seeds: list[int], out: Path, *, size: tup
         for key in tqdm(sorted({s.geometry_key for s in settings}), desc="fs3d bench (real)", unit="setting",
                         disable=not progress):
             try:
-                real_rows[key] = _in_process(run_real, key[0], str(real))
+                real_rows[key] = in_fresh_process(run_real, key[0], str(real))
             except Exception as error:  # a failed setting is a row, not the end of the bench
                 real_rows[key] = {"failed": f"{type(error).__name__}: {error}"}
     from ..device import resolve_device

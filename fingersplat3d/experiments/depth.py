@@ -23,11 +23,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .tables import write_rows
 from ..errors import FS3DError, InputError
 from ..eval import depth_errors
 from ..io.depth import depth_colormap
 from ..io.images import IMAGE_SUFFIXES, find_files
+from .tables import write_rows
 
 __all__ = ["DepthCase", "PAPER_FIGURES", "pair_by_name", "polyu_cases", "capture_cases", "run_depth_evaluation"]
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .tables import write_rows
 from ..errors import FS3DError, InputError
+from .tables import write_rows
 
 __all__ = ["UWA_NAMING", "Sample", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
 

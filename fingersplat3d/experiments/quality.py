@@ -25,8 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .tables import write_rows
 from ..errors import FS3DError
+from .tables import write_rows
 
 __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
 

@@ -30,8 +30,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .tables import write_rows
 from ..errors import FS3DError, InputError
+from .tables import write_rows
 
 __all__ = ["PAPER_FIGURES", "Mates", "default_pairs", "read_mates_csv", "truth_mates", "matcher_mates",
            "run_register_evaluation"]

@@ -6,7 +6,7 @@ mutual-nearest-neighbour check and epipolar verification (``cv2.findFundamentalM
 USAC_MAGSAC), so a pair without overlap (90 degrees apart) returns few or no matches, not garbage.
 No camera parameters are needed.
 
-Methods (measured against synthetic ground truth by ``tools/bench_matching.py``):
+Methods (measured against synthetic ground truth on an earlier generator; the benchmark script is in git history):
 
 These are the classic matchers, kept as ``--matcher`` options; the default first guess of
 ``fs3d fuse`` is the ``surface`` registration of :mod:`fingersplat3d.align.register`, since on

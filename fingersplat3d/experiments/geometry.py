@@ -1,0 +1,157 @@
+"""The geometry of ``fs3d fuse`` against synthetic ground truth: rigs, numbers of views, seeds.
+
+Each case is a rig of ``fs3d synth`` (``ring``: cameras at -45, -22.5, 0, +22.5, +45 degrees about the
+finger; ``uwa``: three cameras at -45/0/+45 with the finger laid in by hand; ``cfpose``: one camera, the
+finger rolled by up to 45 degrees between ten shots) and a number of views handed to ``fuse`` (images
+and masks only, no cameras, no depth). Scored per capture:
+
+* rotation error: the angle between the predicted and the true relative rotation of every pair of
+  fused views (median and max over the pairs);
+* depth error: per fused view, the mean absolute error after a least-squares scale and shift inside
+  the ground-truth mask, over the *whole* view (rims included); the mean over the views and the worst;
+* all views registered, the alignment residual, the fuse's wall time and the process's peak memory.
+
+Every case runs in a fresh process over all its seeds (:func:`run_geometry`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .process import in_fresh_process, peak_rss_mb
+
+__all__ = ["GeometryCase", "CASES", "RING_ANGLES", "RING_VIEWS", "pick_views", "score_geometry", "run_geometry",
+           "geometry_table"]
+
+RING_ANGLES = (-45.0, -22.5, 0.0, 22.5, 45.0)
+RING_VIEWS = {2: ("v0", "v2"), 3: ("v0", "v2", "v4"), 5: ("v0", "v1", "v2", "v3", "v4")}
+
+
+@dataclass(frozen=True)
+class GeometryCase:
+    """A rig of ``fs3d synth``, the number of its views fused, and the image size."""
+
+    rig: str  # "ring" | "uwa" | "cfpose"
+    views: int
+    size: tuple[int, int] = (640, 512)
+
+    @property
+    def label(self) -> str:
+        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}"
+
+    @property
+    def synth_key(self) -> tuple:
+        return (self.rig, self.size)
+
+
+CASES = {
+    "ring2": GeometryCase("ring", 2), "ring3": GeometryCase("ring", 3), "ring5": GeometryCase("ring", 5),
+    "uwa2": GeometryCase("uwa", 2), "uwa3": GeometryCase("uwa", 3),
+    "cfpose2": GeometryCase("cfpose", 2, (512, 640)), "cfpose3": GeometryCase("cfpose", 3, (512, 640)),
+    "cfpose5": GeometryCase("cfpose", 5, (512, 640)),
+    "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
+}
+
+
+def pick_views(capture, case: GeometryCase) -> tuple[str, ...]:
+    """The views of ``capture`` a case fuses: ring views by angle; uwa's left and centre for two views;
+    cfpose's shots spread evenly over the roll, the extremes included."""
+    if case.rig == "ring":
+        return RING_VIEWS[case.views]
+    if case.rig == "uwa":
+        return ("left", "center") if case.views == 2 else tuple(capture.names)
+    poses = capture.metadata["poses"]
+    by_roll = sorted(capture.names, key=lambda name: poses[name]["roll_deg"])
+    picked = np.unique(np.round(np.linspace(0, len(by_roll) - 1, case.views)).astype(int))
+    return tuple(by_roll[i] for i in picked)
+
+
+def score_geometry(result, truth: dict) -> dict:
+    """Rotation and depth errors of a fuse ``result`` of the views ``truth`` (name -> true view), in order."""
+    from ..eval import depth_errors
+    from ..eval.poses import relative_rotation_errors
+
+    names = list(truth)
+    rotations = relative_rotation_errors([c.world_to_cam for c in result.cameras],
+                                         [truth[n].camera.world_to_cam for n in names])
+    depths = [depth_errors(d, truth[n].depth, truth[n].mask).mae for n, d in zip(names, result.depths)]
+    return {"rotation_error_deg": float(np.median(rotations)), "rotation_mean_deg": float(np.mean(rotations)),
+            "rotation_max_deg": float(np.max(rotations)),
+            "depth_mae_mm": float(np.mean(depths)), "depth_worst_view_mm": float(np.max(depths)),
+            "registered_all": bool(all(result.report["alignment"]["aligned"].values()))}
+
+
+def _measure_case(case: GeometryCase, capture_paths: list[str], config) -> list[dict]:
+    """Every seed of one case, fused and scored (runs in its own process)."""
+    import pickle
+
+    from ..pipeline import fuse
+    from ..scene import Capture
+
+    rows = []
+    for path in capture_paths:
+        capture = pickle.loads(Path(path).read_bytes())
+        names = pick_views(capture, case)
+        truth = {name: capture[name] for name in names}
+        blind = Capture(tuple(v.with_(camera=None, depth=None) for v in truth.values()), capture.metadata)
+        row = {"case": case.label, "seed": capture.metadata.get("seed"), "views": " ".join(names)}
+        started = time.perf_counter()
+        try:
+            result = fuse(blind, config)
+        except Exception as error:  # a failed fuse is a row, not the end of the benchmark
+            rows.append({**row, "status": "failed", "reason": f"{type(error).__name__}: {error}"})
+            continue
+        row.update(score_geometry(result, truth), status="done", wall_s=time.perf_counter() - started,
+                   residual_px=result.report["alignment"].get("residual_px"))
+        rows.append(row)
+    for row in rows:
+        row["peak_rss_mb"] = peak_rss_mb()
+    return rows
+
+
+def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progress: bool = True) -> list[dict]:
+    """Rows of :func:`score_geometry` per case and seed; each case in a fresh process, captures made once."""
+    import pickle
+    import tempfile
+
+    from tqdm import tqdm
+
+    from ..pipeline import FuseConfig
+    from ..synth import SynthConfig, synthesize
+
+    config = config or FuseConfig(splat=None)
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        paths: dict[tuple, list[str]] = {}
+        for rig, size in dict.fromkeys(case.synth_key for case in cases):
+            options = {"angles": RING_ANGLES} if rig == "ring" else {}
+            for seed in seeds:
+                capture = synthesize(seed, SynthConfig(rig=rig, size=size, **options)).capture
+                path = Path(scratch) / f"{rig}-{size[0]}-{seed}.pkl"
+                path.write_bytes(pickle.dumps(capture))
+                paths.setdefault((rig, size), []).append(str(path))
+        for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
+            rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
+    return rows
+
+
+def geometry_table(rows: list[dict]) -> str:
+    """A markdown table: per case, medians over seeds (worst in brackets)."""
+    lines = ["| case | seeds | all views registered | rotation error ° (max) | depth MAE mm (worst view) | wall s | peak RSS MB |",
+             "|---|---|---|---|---|---|---|"]
+    for label in dict.fromkeys(r["case"] for r in rows):
+        mine = [r for r in rows if r["case"] == label]
+        done = [r for r in mine if r["status"] == "done"]
+        if not done:
+            lines.append(f"| {label} | {len(mine)} | 0 (failed) | | | | |")
+            continue
+        median = lambda key: float(np.median([r[key] for r in done]))  # noqa: E731
+        worst = lambda key: float(np.max([r[key] for r in done]))  # noqa: E731
+        lines.append(f"| {label} | {len(mine)} | {sum(r['registered_all'] for r in done)} | "
+                     f"{median('rotation_error_deg'):.2f} ({worst('rotation_max_deg'):.2f}) | "
+                     f"{median('depth_mae_mm'):.3f} ({worst('depth_worst_view_mm'):.3f}) | {median('wall_s'):.1f} | "
+                     f"{worst('peak_rss_mb'):.0f} |")
+    return "\n".join(lines)

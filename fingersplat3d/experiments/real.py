@@ -1,0 +1,170 @@
+"""Real rig captures, checks that need no ground truth: registration, rig consistency, leave-one-view-out.
+
+For each capture (three cameras of a fixed rig, e.g. UWA's frames 0-2), a geometry-only fuse gives
+the registered views, the relative rotation of each camera pair, the focal, the residual, time and
+memory (:func:`measure_real`). Over the captures (:func:`summarize_real`):
+
+* **rig consistency** (:func:`~fingersplat3d.eval.rig_consistency.rig_consistency`): the rig is fixed
+  hardware, so each camera pair's relative rotation must be the same in every capture; each
+  capture's deviation from the pair's robust mean, in degrees;
+* **focal spread**: ``(max - min) / median`` of the registered captures' focals (same cameras, same focal);
+* **leave-one-view-out** (optional): frames 0 and 1 fused alone and seen from camera 2, posed against
+  that two-view model by PnP from where the three-view run puts frame 0's pixels in frame 2 (the model
+  under test never sees frame 2's pixels): the share of its surface outside frame 2's silhouette and
+  the correlation of its ridge texture with frame 2's (about 0 when off by half a ridge period).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .process import peak_rss_mb
+
+__all__ = ["measure_real", "summarize_real", "real_table"]
+
+
+def _texture_seen_from(texture, depth, camera, target_camera, target_mask):
+    """A view's ridge texture carried by its depth into ``target_camera`` (nearest pixel, nearest depth wins),
+    and the share of it that lands outside ``target_mask``."""
+    rows, cols = np.nonzero(np.isfinite(depth))
+    points = camera.unproject(np.stack([cols, rows], 1).astype(np.float64), depth[rows, cols])
+    uv, z = target_camera.project(points)
+    u, v = np.round(uv[:, 0]), np.round(uv[:, 1])
+    inside = np.isfinite(u) & (u >= 0) & (v >= 0) & (u < target_camera.width) & (v < target_camera.height)
+    u, v, z, values = u[inside].astype(int), v[inside].astype(int), z[inside], texture[rows[inside], cols[inside]]
+    order = np.argsort(-z)  # far first, so that the nearest point is written last
+    image = np.full((target_camera.height, target_camera.width), np.nan, np.float32)
+    image[v[order], u[order]] = values[order]
+    outside = float(np.mean(~target_mask[v, u])) if len(u) else float("nan")
+    return image, outside
+
+
+def _texture_check(two, camera2, view2) -> dict:
+    from ..align.correspond.texture import estimate_ridge_period, ridge_texture
+
+    period = estimate_ridge_period(view2.image, view2.mask)
+    target = ridge_texture(view2.image, view2.mask, period)
+    predicted = np.full(target.shape, np.nan, np.float32)
+    outside = []
+    for index in (0, 1):
+        view = two.capture.views[index]
+        image, out = _texture_seen_from(ridge_texture(view.image, view.mask, period), two.depths[index],
+                                        two.cameras[index], camera2, view2.mask)
+        predicted = np.where(np.isnan(predicted), image, predicted)
+        outside.append(out)
+    both = np.isfinite(predicted) & view2.mask
+    x, y = predicted[both] - predicted[both].mean(), target[both] - target[both].mean()
+    ncc = float(np.dot(x, y) / np.sqrt(np.dot(x, x) * np.dot(y, y) + 1e-12)) if both.sum() > 100 else None
+    return {"outside_mask": float(np.mean(outside)), "texture_ncc": ncc}
+
+
+def _leave_one_out(three, two) -> dict:
+    import cv2
+
+    from ..scene import Camera
+
+    if not (three.registered and two.registered):
+        return {"outside_mask": None, "texture_ncc": None}
+    view2 = three.capture.views[2]
+    rows, cols = np.nonzero(np.isfinite(three.depths[0]) & np.isfinite(two.depths[0]))
+    pick = np.random.default_rng(0).choice(len(rows), min(4000, len(rows)), replace=False)
+    pixels0 = np.stack([cols[pick], rows[pick]], 1).astype(np.float64)
+    seen_in_2, _ = three.cameras[2].project(three.cameras[0].unproject(pixels0, three.depths[0][rows[pick], cols[pick]]))
+    inside = np.isfinite(seen_in_2).all(1)
+    inside[inside] = view2.mask[np.clip(np.round(seen_in_2[inside, 1]).astype(int), 0, view2.height - 1),
+                                np.clip(np.round(seen_in_2[inside, 0]).astype(int), 0, view2.width - 1)]
+    model_points = two.cameras[0].unproject(pixels0, two.depths[0][rows[pick], cols[pick]])
+    focal = two.cameras[0].K[0, 0]
+    K = np.array([[focal, 0, (view2.width - 1) / 2], [0, focal, (view2.height - 1) / 2], [0, 0, 1.0]])
+    ok, rvec, tvec, _ = cv2.solvePnPRansac(model_points[inside], seen_in_2[inside], K, None, reprojectionError=3.0)
+    if not ok:
+        return {"outside_mask": None, "texture_ncc": None}
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
+    return _texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
+
+
+def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
+    """One real capture fused (geometry only unless ``config`` says otherwise): a record for :func:`summarize_real`."""
+    from ..eval.poses import rotation_angle_deg
+    from ..pipeline import FuseConfig, fuse
+    from ..scene import Capture
+
+    config = config or FuseConfig(splat=None)
+    started = time.perf_counter()
+    three = fuse(capture, config)
+    seconds = time.perf_counter() - started
+    report = three.report
+    rotations = [c.world_to_cam[:3, :3] for c in three.cameras]
+    ids = [str(capture.metadata[key]) for key in ("subject", "finger") if capture.metadata.get(key) is not None]
+    record = {"capture": capture.metadata.get("name", "capture"), "finger": "_".join(ids) or None,
+              "seconds": seconds, "peak_rss_mb": peak_rss_mb(),
+              "registered": int(sum(report["alignment"]["aligned"].values())),
+              "focal": float(report["alignment"]["focals_px"][0]), "residual_px": report["alignment"].get("residual_px"),
+              "sizes": [[v.width, v.height] for v in capture.views],
+              "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
+              "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
+                             for i in range(len(rotations)) for j in range(i + 1, len(rotations))}}
+    if leave_one_out and len(capture) == 3:
+        two = fuse(Capture(capture.views[:2], capture.metadata), config)
+        record["leave_one_out"] = _leave_one_out(three, two)
+    return record
+
+
+def summarize_real(records: list[dict]) -> dict:
+    """Rig consistency per camera pair, focal spread and medians over the captures."""
+    from ..eval.rig_consistency import rig_consistency
+
+    rig = rig_consistency(records) if all(len(r["sizes"]) == 3 for r in records) else {}
+    registered = [r for r in records if r["registered"] == len(r["sizes"])]
+    focals = np.array([r["focal"] for r in registered])
+    deviations = [d for pair in rig.values() for d in pair["deviation_deg"].values()]
+    nan = float("nan")
+    fingers = sorted({r["finger"] for r in records if r.get("finger")})
+    by_finger = {finger: {pair: float(np.median([d for name, d in entry["deviation_deg"].items()
+                                                 if any(r["capture"] == name and r.get("finger") == finger for r in records)]
+                                                or [nan]))
+                          for pair, entry in rig.items()} for finger in fingers} if len(fingers) > 1 else {}
+    return {"captures": len(records), "registered_all": len(registered), "rig": rig, "by_finger": by_finger,
+            "rig_deviation_median_deg": float(np.median(deviations)) if deviations else nan,
+            "rig_deviation_max_deg": float(np.max(deviations)) if deviations else nan,
+            "focal_spread": float((focals.max() - focals.min()) / np.median(focals)) if len(focals) > 1 else nan,
+            "fuse_s_median": float(np.median([r["seconds"] for r in records])) if records else nan,
+            "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan)}
+
+
+def real_table(records: list[dict], summary: dict) -> str:
+    """The per-capture markdown table and its median row."""
+    rig = summary["rig"]
+    lines = ["| capture | views registered | angle 0-1 / 0-2 / 1-2 ° | rig deviation 0-1 / 0-2 / 1-2 ° | focal px | "
+             "residual px | leave-one-out: outside mask, texture NCC | time s | peak RSS GB |",
+             "|---|---|---|---|---|---|---|---|---|"]
+
+    def loo(values: list[dict]) -> str:
+        values = [v for v in values if v and v.get("texture_ncc") is not None]
+        if not values:
+            return "–"
+        return (f"{100 * np.median([v['outside_mask'] for v in values]):.1f} %, "
+                f"{np.median([v['texture_ncc'] for v in values]):.2f}")
+
+    for r in records:
+        deviation = " / ".join(f"{rig[p]['deviation_deg'][r['capture']]:.2f}" if p in rig and r["capture"] in
+                               rig[p]["deviation_deg"] else "–" for p in ("01", "02", "12"))
+        roll = " (portrait view)" if "roll_corrected" in r else ""
+        residual = "–" if r["residual_px"] is None else f"{r['residual_px']:.2f}"
+        lines.append(f"| {r['capture']}{roll} | {r['registered']}/{len(r['sizes'])} | "
+                     f"{' / '.join(f'{v:.1f}' for v in r['angles_deg'].values())} | {deviation} | {r['focal']:.0f} | "
+                     f"{residual} | {loo([r.get('leave_one_out')])} | {r['seconds']:.1f} | {r['peak_rss_mb'] / 1024:.2f} |")
+    if rig:
+        means = " / ".join(f"{rig[p]['mean_angle_deg']:.1f}" for p in ("01", "02", "12"))
+        medians = " / ".join(f"{rig[p]['median_deg']:.2f}" for p in ("01", "02", "12"))
+        residuals = [r["residual_px"] for r in records if r["residual_px"] is not None]
+        lines.append(f"| **median** | {summary['registered_all']}/{summary['captures']} captures | {means} (rig mean) | "
+                     f"**{medians}** | spread {100 * summary['focal_spread']:.0f} % | "
+                     f"{np.median(residuals):.2f} | {loo([r.get('leave_one_out') for r in records])} | "
+                     f"{summary['fuse_s_median']:.1f} | {summary['peak_rss_mb'] / 1024:.2f} |")
+        for finger, medians in summary.get("by_finger", {}).items():
+            values = " / ".join(f"{medians[p]:.2f}" for p in ("01", "02", "12"))
+            lines.append(f"| median, finger {finger} | | | {values} | | | | | |")
+    return "\n".join(lines)
