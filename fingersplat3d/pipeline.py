@@ -18,15 +18,16 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from . import __version__
+from .align.register import RegistrationConfig, register_views
 from .align.solve.global_opt import GlobalAlignment, global_align
 from .align.solve.icp import ICPConfig, refine_poses
-from .align.register import RegistrationConfig, register_views
 from .align.solve.rig import Rig, RigCapture
+from .align.transfer import multi_view_support
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
-from .splat.voting import CleanConfig
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
+from .splat.voting import CleanConfig
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
 
@@ -380,7 +381,9 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                 mesh = mesh_from_cloud(cloud)
     finally:
         bar.close()  # before any message: an error is the last line the user sees
+    support = multi_view_support(depths, cameras, [bool(a) for a in alignment.aligned])
     report["alignment"].update(
+        backed_by_two_views={name: None if share is None else round(share, 3) for name, share in zip(capture.names, support)},
         residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d, focals_px=alignment.focals,
         relief_scale=alignment.relief_scale, spanning_tree=[[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
         aligned=dict(zip(capture.names, alignment.aligned)))

@@ -30,6 +30,8 @@ def reconstruction(uwa):
 def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):
     report = reconstruction.report
     assert report["alignment"]["ok"] and all(report["alignment"]["aligned"].values())
+    support = report["alignment"]["backed_by_two_views"]  # the front view is seen by both side views
+    assert support["center"] > 0.9 and all(0.3 < share <= 1.0 for share in support.values())
     errors = relative_rotation_errors([c.world_to_cam for c in reconstruction.cameras],
                                       [v.camera.world_to_cam for v in uwa.views])
     # The 45-degree pairs: measured 3-7 degrees (see the README's table); a broken alignment is tens.
@@ -148,6 +150,7 @@ def test_views_of_different_fingers_are_not_registered(capsys):
     result = fuse(Capture(views), GEOMETRY)
     _finite_result(result)
     assert not result.registered and result.report["alignment"]["not_registered"] == ["other"]
+    assert result.report["alignment"]["backed_by_two_views"]["other"] is None
     assert "could not be registered" in capsys.readouterr().err
 
 
@@ -173,3 +176,24 @@ def test_extreme_focal_guesses_stay_finite(uwa):
     for factor in (1e-2, 1e3):
         pointmaps = PriorBackend(focal_factor=factor).predict_views(uwa.views)
         assert all(np.isfinite(pm.points[pm.valid]).all() for pm in pointmaps)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("odd_one", ["mirrored", "other finger"])
+def test_real_views_that_do_not_belong_are_not_registered(odd_one, tmp_path):
+    """A left-right mirrored side view, or another finger's side view, beside two real views of one finger:
+    exit 3 naming that view, never a confident model (real dev captures; skipped where they are absent)."""
+    import cv2
+
+    data = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
+    if not data.is_dir():
+        pytest.skip("the real dev captures are not here")
+    odd = tmp_path / "odd.png"
+    if odd_one == "mirrored":
+        cv2.imwrite(str(odd), cv2.imread(str(data / "2_2_8_1_1.jpg"), cv2.IMREAD_UNCHANGED)[:, ::-1])
+    else:
+        cv2.imwrite(str(odd), cv2.imread(str(data / "1_1_2_1_1.jpg"), cv2.IMREAD_UNCHANGED))
+    code = main(["fuse", str(data / "2_2_8_1_0.jpg"), str(odd), str(data / "2_2_8_1_2.jpg"), "-o", str(tmp_path / "out"),
+                 "--no-splat"])
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert code == 3 and report["alignment"]["not_registered"] == ["odd"]

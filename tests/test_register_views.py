@@ -2,6 +2,7 @@
 import csv
 
 import numpy as np
+import pytest
 
 from fingersplat3d.align.transfer import transfer_points, warp_image
 from fingersplat3d.cli import main
@@ -68,3 +69,24 @@ def test_register_command_on_a_fused_sample(tmp_path, capsys):
     bad.write_text("u,v\n1,2\n")
     assert main(["register", str(rec), "center", "right", "--points", str(bad), "-o", str(tmp_path / "o3")]) == EXIT_INPUT
     assert "needs x and y columns" in capsys.readouterr().err
+
+
+def _plane_view(offset_x: float, width=40, height=30, depth=10.0):
+    """A camera looking down +z at the plane z = depth, shifted by ``offset_x`` (pixels of that plane)."""
+    from fingersplat3d.scene import Camera
+
+    pose = np.eye(4)
+    pose[0, 3] = -offset_x * depth / 50.0  # world_to_cam translation: the camera sits at +offset
+    return Camera.from_focal(50.0, width, height, pose), np.full((height, width), depth, np.float32)
+
+
+def test_multi_view_support_is_the_share_another_view_sees():
+    from fingersplat3d.align.transfer import multi_view_support
+
+    (cam_a, depth_a), (cam_b, depth_b), (cam_c, depth_c) = _plane_view(0.0), _plane_view(20.0), _plane_view(500.0)
+    shares = multi_view_support([depth_a, depth_b, depth_c], [cam_a, cam_b, cam_c], [True, True, True], stride=1)
+    assert shares[0] == pytest.approx(0.5, abs=0.05)  # b, shifted by half the image, sees half of a's plane
+    assert shares[2] == 0.0  # c sees other ground
+    assert multi_view_support([depth_a, depth_b], [cam_a, cam_b], [True, False], stride=1) == [0.0, None]
+    shares = multi_view_support([depth_a, depth_a.copy()], [cam_a, cam_a], [True, True], stride=2)
+    assert shares == [1.0, 1.0]  # two photos of one skin: all of it seen twice

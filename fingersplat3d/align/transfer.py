@@ -21,7 +21,7 @@ import numpy as np
 from ..sampling import sample_nearest
 from ..scene import Camera
 
-__all__ = ["STATUSES", "transfer_points", "warp_image", "surface_tolerance"]
+__all__ = ["STATUSES", "transfer_points", "warp_image", "surface_tolerance", "multi_view_support"]
 
 STATUSES = ("mapped", "off_surface", "outside", "hidden")
 TOLERANCE_FRACTION = 0.02
@@ -84,3 +84,28 @@ def warp_image(image_a: np.ndarray, depth_a: np.ndarray, camera_a: Camera, depth
     valid = valid.reshape(h, w)
     warped[~valid] = 0
     return warped, valid
+
+
+def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool],
+                       stride: int = 4) -> list[float | None]:
+    """Per view: the share of its surface (pixels with depth, every ``stride``-th row and column) that at
+    least one other aligned view also sees (:func:`transfer_points` says ``mapped`` and the other view has
+    depth there). Where no second view sees the skin, its shape is the pointmap's guess, not the photos'.
+    None for a view that is not aligned."""
+    shares: list[float | None] = []
+    for a, (depth_a, camera_a) in enumerate(zip(depths, cameras)):
+        if not aligned[a]:
+            shares.append(None)
+            continue
+        rows, cols = np.nonzero(np.isfinite(depth_a[::stride, ::stride]))
+        uv = np.stack([cols, rows], 1).astype(np.float64) * stride
+        seen = np.zeros(len(uv), bool)
+        for b, (depth_b, camera_b) in enumerate(zip(depths, cameras)):
+            if b == a or not aligned[b] or not len(uv):
+                continue
+            uv_b, status = transfer_points(uv, depth_a, camera_a, depth_b, camera_b)
+            mapped = status == "mapped"
+            mapped[mapped] = np.isfinite(sample_nearest(depth_b, uv_b[mapped]))
+            seen |= mapped
+        shares.append(float(seen.mean()) if len(uv) else 0.0)
+    return shares
