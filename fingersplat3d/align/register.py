@@ -34,11 +34,11 @@ from ..scene import View
 from .correspond.chart import CylinderChart
 from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
 from .correspond.epipolar import fundamental_inliers
-from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .correspond.guided import GuidedMatches, match_guided
 from .correspond.model_predictor import ModelPredictor
-from .solve.rig import Rig, rig_align
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
+from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .solve.rig import Rig, rig_align
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
 
@@ -144,8 +144,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     (:mod:`~fingersplat3d.align.solve.rig`) whose camera poses and focal are kept fixed; the views are
     its cameras in order.
     """
-    from .solve.pairwise import register_pair
     from .correspond.features import Matches
+    from .solve.pairwise import register_pair
 
     say = progress or (lambda text: None)
     n_views = len(views)

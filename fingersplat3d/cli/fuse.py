@@ -49,8 +49,11 @@ def add(commands) -> None:
                            "it slides about the axis, see the README)")
     fuse.add_argument("--polish-iterations", "--alignment-iterations", type=STEPS, dest="polish_iterations",
                       default=GlobalAlignConfig.polish_iterations,
-                      help=f"L-BFGS iterations of each global alignment round (default {GlobalAlignConfig.polish_iterations}; "
-                           "--alignment-iterations: its former name)")
+                      help=f"with --alignment-solver lbfgs: L-BFGS iterations of each global alignment round (default "
+                           f"{GlobalAlignConfig.polish_iterations}; --alignment-iterations: its former name)")
+    fuse.add_argument("--alignment-solver", choices=("lm", "lbfgs"), default=GlobalAlignConfig.solver,
+                      help="global alignment solver: lm (Levenberg-Marquardt, default) or lbfgs (slower to converge; "
+                           "measured in docs/measurements.md)")
     fuse.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': keep its camera poses and focal fixed "
                                                "(the views are its cameras in order)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -72,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
-                                      global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations))
+                                      global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations,
+                                                                     solver=args.alignment_solver))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,

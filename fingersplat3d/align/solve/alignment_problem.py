@@ -18,7 +18,7 @@ symmetric reprojection error, a's point through a's depth into b against ``q`` a
 through b's depth into a against ``p``, each ``r^T I r`` in Cauchy-robust form; plus a bending
 penalty on each field, a pull of ``log alpha`` toward 0 and of the focal toward its guess.
 Correspondence weights are normalised to sum to 1, so the priors' strengths do not depend on
-how many matches there are. Pure torch.
+how many matches there are. Torch, with scipy.sparse for the Levenberg-Marquardt system.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+import scipy.sparse as sparse
 import torch
 
 from ...rotations import axis_angle_to_matrix
@@ -106,6 +107,7 @@ class AlignmentProblem(torch.nn.Module):
             buffer(f"uv_{end}", getattr(data, f"uv_{end}"))
             buffer(f"z_{end}", getattr(data, f"z_{end}"))
             buffer(f"info_{end}", getattr(data, f"information_{end}"))
+            buffer(f"white_{end}", _whitening(getattr(data, f"information_{end}")))
             buffer(f"basis_index_{end}", index, torch.long)
             buffer(f"basis_weight_{end}", weight)
         buffer("weight", data.weight)
@@ -152,14 +154,11 @@ class AlignmentProblem(torch.nn.Module):
 
     def _world_points(self, cameras: tuple, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         rotations, translations, focals = cameras
-        rays = torch.cat([(uv - self.centres[view]) / focals[view][:, None], torch.ones_like(uv[:, :1])], dim=1)
-        return torch.einsum("nij,nj->ni", rotations[view], depth[:, None] * rays) + translations[view]
+        return _lift(rotations[view], translations[view], focals[view], self.centres[view], uv, depth)
 
     def _project(self, cameras: tuple, view: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
         rotations, translations, focals = cameras
-        camera = torch.einsum("nji,nj->ni", rotations[view], points - translations[view])
-        z = camera[:, 2].clamp_min(1e-9)
-        return camera[:, :2] / z[:, None] * focals[view][:, None] + self.centres[view]
+        return _project(rotations[view], translations[view], focals[view], self.centres[view], points)
 
     # -- the loss -------------------------------------------------------------------------------
     def cameras(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -184,6 +183,117 @@ class AlignmentProblem(torch.nn.Module):
         e_ba = torch.einsum("ni,nij,nj->n", r_ba, self.info_a, r_ba)
         return x_a, x_b, e_ab, e_ba
 
+    # -- per correspondence, for Levenberg-Marquardt (:mod:`fingersplat3d.align.solve.levenberg`) ---------------
+    def row_unknowns(self) -> dict[str, torch.Tensor]:
+        """The values each correspondence reads, per end: ``[M, k]`` tensors (``f_*``: its field value)."""
+        with torch.no_grad():
+            omega, translations = self.omega * self.free[:, None], self.translations()
+            log_scales = self.log_scale * self.free + self.base_log_scale * (1 - self.free)
+            log_alphas, log_focals = self.log_alphas(), torch.log(self.focals())
+            values = {}
+            for end in ("a", "b"):
+                view = getattr(self, f"view_{end}")
+                field = ((self.field[getattr(self, f"basis_index_{end}")] * getattr(self, f"basis_weight_{end}")).sum(-1)
+                         if self.field.numel() else torch.zeros_like(getattr(self, f"z_{end}")))
+                values.update({f"omega_{end}": omega[view], f"t_{end}": translations[view],
+                               f"ls_{end}": log_scales[view][:, None], f"la_{end}": log_alphas[view][:, None],
+                               f"lf_{end}": log_focals[view][:, None], f"f_{end}": field[:, None]})
+            return values
+
+    def row_residuals(self, omega_a, omega_b, t_a, t_b, ls_a, ls_b, la_a, la_b, lf_a, lf_b, f_a, f_b) -> torch.Tensor:
+        """``[M, 4]``: the whitened reprojection errors a->b and b->a (``e = |.|^2``) from per-row values."""
+        ends = {}
+        for end, omega, t, ls, la, lf, f in (("a", omega_a, t_a, ls_a, la_a, lf_a, f_a), ("b", omega_b, t_b, ls_b, la_b, lf_b, f_b)):
+            view = getattr(self, f"view_{end}")
+            rotation = axis_angle_to_matrix(omega) @ self.base_rotation[view]
+            median = self.medians[view]
+            depth = torch.exp(ls[:, 0]) * (median + torch.exp(la[:, 0]) * (getattr(self, f"z_{end}") - median)
+                                           + self.reliefs[view] * f[:, 0])
+            ends[end] = (rotation, t, torch.exp(lf[:, 0]), self.centres[view], depth)
+        x_a = _lift(*ends["a"][:4], self.uv_a, ends["a"][4])
+        x_b = _lift(*ends["b"][:4], self.uv_b, ends["b"][4])
+        r_ab = _project(*ends["b"][:4], x_a) - self.uv_b
+        r_ba = _project(*ends["a"][:4], x_b) - self.uv_a
+        return torch.cat([torch.einsum("nij,nj->ni", self.white_b, r_ab), torch.einsum("nij,nj->ni", self.white_a, r_ba)], 1)
+
+    def _layout(self) -> dict[str, int]:
+        n = self.medians.shape[0]
+        alphas, focals = self.log_alpha.numel(), self.log_focal.numel()
+        return {"omega": 0, "translation": 3 * n, "log_scale": 6 * n, "log_alpha": 7 * n, "log_focal": 7 * n + alphas,
+                "field": 7 * n + alphas + focals}
+
+    def row_columns(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """For each of :meth:`row_unknowns`' values, the columns of :meth:`unknowns` it is made of
+        (``[M, k, C]``, -1 where fixed) and their weights."""
+        at, free = self._layout(), self.free.numpy() > 0
+        shared_alpha, shared_focal = self.log_alpha.numel() == 1, self.log_focal.numel() == 1
+        columns = {}
+        for end in ("a", "b"):
+            view = getattr(self, f"view_{end}").numpy()
+            count, ones = len(view), np.ones((len(view), 1, 1))
+            fixed = np.where(free[view], 0, -1)[:, None]
+
+            def per_view(start, width):
+                cols = start + width * view[:, None] + np.arange(width)[None, :]
+                return np.where(fixed < 0, -1, cols)[:, :, None], np.ones((count, width, 1))
+
+            columns[f"omega_{end}"] = per_view(at["omega"], 3)
+            columns[f"t_{end}"] = per_view(at["translation"], 3)
+            columns[f"ls_{end}"] = per_view(at["log_scale"], 1)
+            columns[f"la_{end}"] = ((at["log_alpha"] + (0 * view if shared_alpha else view))[:, None, None] * ones).astype(np.int64), ones
+            focal_cols = (at["log_focal"] + (0 * view if shared_focal else view))[:, None, None] * ones
+            columns[f"lf_{end}"] = (focal_cols if self.log_focal.requires_grad else -ones).astype(np.int64), ones
+            if self.field.numel():
+                columns[f"f_{end}"] = ((at["field"] + getattr(self, f"basis_index_{end}").numpy())[:, None, :],
+                                       getattr(self, f"basis_weight_{end}").numpy()[:, None, :])
+            else:
+                columns[f"f_{end}"] = -ones.astype(np.int64), ones
+        return columns
+
+    def unknowns(self) -> torch.Tensor:
+        """Every unknown, flat: omega, translation, log scale, log relief, log focal, field coefficients."""
+        return torch.cat([p.detach().reshape(-1) for p in (self.omega, self.translation, self.log_scale, self.log_alpha,
+                                                           self.log_focal, self.field)]).clone()
+
+    def set_unknowns(self, values: torch.Tensor) -> None:
+        with torch.no_grad():
+            start = 0
+            for p in (self.omega, self.translation, self.log_scale, self.log_alpha, self.log_focal, self.field):
+                p.copy_(values[start:start + p.numel()].reshape(p.shape))
+                start += p.numel()
+
+    def prior_system(self) -> tuple[np.ndarray, sparse.csr_matrix]:
+        """The priors as residual rows (their squares sum to the priors' part of the loss) and their Jacobian."""
+
+        at, size = self._layout(), self.unknowns().numel()
+        residuals, rows, cols, vals = [], [], [], []
+
+        def add(values: np.ndarray, entries: list[tuple[np.ndarray, np.ndarray]]):
+            first = sum(len(r) for r in residuals)
+            residuals.append(values)
+            for column, weight in entries:
+                rows.append(first + np.arange(len(values)))
+                cols.append(column)
+                vals.append(np.broadcast_to(weight, len(values)).astype(np.float64))
+
+        field = self.field.detach().numpy()
+        if self.bend_index.numel():
+            bend, root = self.bend_index.numpy(), np.sqrt(self.field_smoothness)
+            add(root * (field[bend[:, 0]] - 2 * field[bend[:, 1]] + field[bend[:, 2]]),
+                [(at["field"] + bend[:, 0], root), (at["field"] + bend[:, 1], -2 * root), (at["field"] + bend[:, 2], root)])
+        if field.size:
+            add(np.sqrt(self.field_prior) * field, [(at["field"] + np.arange(field.size), np.sqrt(self.field_prior))])
+        alphas = self.log_alpha.detach().numpy()
+        repeat = self.medians.shape[0] if alphas.size == 1 else 1  # a shared relief is counted once per view
+        add(np.sqrt(self.alpha_prior * repeat) * alphas, [(at["log_alpha"] + np.arange(alphas.size), np.sqrt(self.alpha_prior * repeat))])
+        if self.log_focal.requires_grad:
+            guess = (self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess).numpy()
+            focal = self.log_focal.detach().numpy()
+            add(np.sqrt(self.focal_prior) * (focal - guess), [(at["log_focal"] + np.arange(focal.size), np.sqrt(self.focal_prior))])
+        total = sum(len(r) for r in residuals)
+        jacobian = sparse.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(total, size))
+        return np.concatenate(residuals), jacobian.tocsr()
+
     def forward(self, cameras: tuple | None = None) -> torch.Tensor:
         _, _, e_ab, e_ba = self.correspondence_terms(cameras)
         scale = self.robust_px ** 2
@@ -195,3 +305,25 @@ class AlignmentProblem(torch.nn.Module):
         guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
         return loss + self.focal_prior * ((self.log_focal - guess) ** 2).sum()
 
+
+
+def _lift(rotation, translation, focal, centre, uv, depth) -> torch.Tensor:
+    """Per row: pixel ``uv`` at ``depth`` in a camera (cam_to_world ``rotation``, ``translation``) -> world point."""
+    rays = torch.cat([(uv - centre) / focal[:, None], torch.ones_like(uv[:, :1])], dim=1)
+    return torch.einsum("nij,nj->ni", rotation, depth[:, None] * rays) + translation
+
+
+def _project(rotation, translation, focal, centre, points) -> torch.Tensor:
+    """Per row: world point -> pixel of a camera (cam_to_world ``rotation``, ``translation``)."""
+    camera = torch.einsum("nji,nj->ni", rotation, points - translation)
+    z = camera[:, 2].clamp_min(1e-9)
+    return camera[:, :2] / z[:, None] * focal[:, None] + centre
+
+
+def _whitening(information: np.ndarray) -> np.ndarray:
+    """``W [M, 2, 2]`` with ``W^T W = I`` for each information matrix ``I`` (so ``r^T I r = |W r|^2``)."""
+    information = np.asarray(information, np.float64)
+    if len(information) == 0:
+        return np.zeros((0, 2, 2))
+    values, vectors = np.linalg.eigh(0.5 * (information + np.swapaxes(information, 1, 2)))
+    return np.sqrt(np.clip(values, 0.0, None))[:, :, None] * np.swapaxes(vectors, 1, 2)

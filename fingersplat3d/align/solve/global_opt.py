@@ -1,8 +1,9 @@
 """Global alignment of N views (the paper's eq. 3): poses, focal, scales and surface, jointly.
 
 The problem (unknowns and loss) is :class:`~fingersplat3d.align.alignment_problem.AlignmentProblem`;
-this module builds it from the pairs, starts it and runs the generic loop
-(:func:`~fingersplat3d.align.optimize.minimize`):
+this module builds it from the pairs, starts it and solves it by Levenberg-Marquardt
+(:func:`~fingersplat3d.align.solve.levenberg.levenberg_marquardt`; or the generic Adam/L-BFGS loop,
+:func:`~fingersplat3d.align.solve.optimize.minimize`, with ``solver="lbfgs"``):
 
 * start: a maximum spanning tree of the pairs by correspondence weight chains each pair's
   similarity ``b_to_a`` from the root (DUSt3R's ``init='mst'``); views the tree does not reach are
@@ -16,7 +17,8 @@ the depth of its points trade against each other (the bas-relief ambiguity); thr
 the trade only where their correspondences share surface. A smooth field per view makes every
 correspondence of a pair inform the surface that the other pairs see, and the pointmap shape
 fills in between. Measured on synthetic captures with ground truth, free points left the
-relative rotations 4-8 degrees off; the fields, 0.4-2.6 degrees (see the README).
+relative rotations 4-8 degrees off; the fields, solved to convergence, 0.3-0.9 degrees
+(docs/measurements.md, synthetic geometry).
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from ...device import single_threaded
 from ...sampling import sample_bilinear
 from .alignment_problem import AlignmentProblem, Correspondences, InitialState
 from .depth_field import FieldGrid
+from .levenberg import levenberg_marquardt
 from .optimize import minimize
 
 __all__ = ["PairCorrespondences", "GlobalAlignConfig", "GlobalAlignment", "global_align", "spanning_tree", "reached",
@@ -80,6 +83,11 @@ class GlobalAlignConfig:
     """Pull of log relief scale toward 0."""
     focal_prior: float = 1e-4
     """Pull of log focal toward the guess."""
+    solver: str = "lm"
+    """``lm``: Levenberg-Marquardt on the sparse Jacobian (:mod:`~fingersplat3d.align.solve.levenberg`);
+    ``lbfgs``: Adam (``iterations``) then L-BFGS (``polish_*``), which converges slowly on this problem."""
+    lm_iterations: int = 15
+    """Levenberg-Marquardt steps per round at most (it stops when the loss no longer falls)."""
     shared_relief: bool = True
     """One relief scale for all views (they see one finger) instead of one per view. Measured (README,
     5 seeds): rotation error median on synthetic ``cfpose`` 3.93 -> 3.35 deg, ``uwa`` 1.99 -> 2.01 deg;
@@ -214,8 +222,13 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
                                [np.zeros(g.size) for g in grids])
     problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root)
     with single_threaded():  # a few thousand residuals: threads only add hand-offs
-        history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
-                           config.polish_rounds) if len(data.weight) else []
+        if not len(data.weight):
+            history = []
+        elif config.solver == "lm":
+            history = levenberg_marquardt(problem, config.lm_iterations)
+        else:
+            history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
+                               config.polish_rounds)
     return alignment_result(problem, depths, grids, data, root, tree, aligned, history)
 
 

@@ -34,8 +34,16 @@ from scipy.spatial.transform import Rotation
 from ...device import single_threaded
 from ...rotations import axis_angle_to_matrix
 from .alignment_problem import InitialState
-from .global_opt import (GlobalAlignConfig, GlobalAlignment, PairCorrespondences, alignment_problem, alignment_result,
-                         field_grids, reached, spanning_tree)
+from .global_opt import (
+    GlobalAlignConfig,
+    GlobalAlignment,
+    PairCorrespondences,
+    alignment_problem,
+    alignment_result,
+    field_grids,
+    reached,
+    spanning_tree,
+)
 from .optimize import minimize
 
 __all__ = ["Rig", "RigCapture", "RigCalibration", "calibrate_rig", "rig_align", "robust_rotation_mean", "quarter_turn"]

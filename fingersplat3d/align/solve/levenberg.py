@@ -1,0 +1,108 @@
+"""Levenberg-Marquardt for the global-alignment problem: its sparse Jacobian, built row by row.
+
+Why not only L-BFGS: the problem couples a few pose and focal unknowns with hundreds of depth-field
+coefficients, and is badly conditioned (the turn between views, the relief and the focal trade
+against each other). L-BFGS with a 30-step memory crawls along that valley: on five ring views it
+was still lowering the loss after 3000 iterations, with the rotations 6 degrees off after the 300
+the fuse could afford. A Gauss-Newton step solves the whole quadratic model at once.
+
+Each correspondence's four whitened residuals (a->b and b->a, two pixels each) depend on the two
+views' poses, scales, relief, focal and on one field value per end, which is a fixed combination of
+16 field coefficients. So the Jacobian is built from 20 per-row derivatives (forward-mode products
+of :meth:`AlignmentProblem.row_residuals`, one per local unknown) scattered into a sparse matrix,
+plus the priors' rows (linear in the unknowns, or nearly). The Cauchy loss is handled by iteratively
+reweighted least squares: each residual scaled by ``sqrt(w / (c^2 + e))``, so the step's gradient
+is the true loss's. Steps are accepted only if the true loss (:meth:`AlignmentProblem.forward`)
+decreases. Pure torch/numpy/scipy.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sparse
+import torch
+
+__all__ = ["levenberg_marquardt"]
+
+
+def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
+    """IRLS-weighted residual vector and its Jacobian over ``problem.unknowns()``'s flat layout."""
+    local = problem.row_unknowns()  # name -> [M, k] tensors, the values each row reads
+    names = list(local)
+    with torch.no_grad():
+        rows = problem.row_residuals(**local)  # [M, 4] whitened
+    columns = problem.row_columns()  # name -> ([M, k, c] int column indices, [M, k, c] weights) or None
+    e = torch.stack([(rows[:, :2] ** 2).sum(1), (rows[:, 2:] ** 2).sum(1)], 1)  # [M, 2]
+    irls = torch.sqrt(problem.weight[:, None] / (problem.robust_px ** 2 + e))  # [M, 2]
+    scale = irls.repeat_interleave(2, dim=1)  # [M, 4]
+    residual = (rows * scale).reshape(-1).numpy()
+    count = rows.shape[0]
+    # One forward-mode pass per local unknown, all batched: tangent j is 1 in one column of one input.
+    slots = [(name, k) for name in names for k in range(local[name].shape[1])]
+    tangents = {name: torch.zeros((len(slots), *local[name].shape), dtype=local[name].dtype) for name in names}
+    for j, (name, k) in enumerate(slots):
+        tangents[name][j, :, k] = 1.0
+    primals = tuple(local[n] for n in names)
+
+    def derivative(*tangent):
+        return torch.func.jvp(lambda *args: problem.row_residuals(**dict(zip(names, args))), primals, tangent)[1]
+
+    derivatives = (torch.func.vmap(derivative)(*(tangents[n] for n in names)) * scale).numpy()  # [slots, M, 4]
+    data_rows, data_cols, data_vals = [], [], []
+    row_index = np.arange(4 * count).reshape(count, 4)
+    for j, (name, k) in enumerate(slots):
+        c, w = columns[name][0][:, k, :], columns[name][1][:, k, :]  # [M, C]
+        vals = derivatives[j][:, :, None] * w[:, None, :]  # [M, 4, C]
+        mask = np.broadcast_to((c >= 0)[:, None, :], vals.shape)
+        data_rows.append(np.broadcast_to(row_index[:, :, None], vals.shape)[mask])
+        data_cols.append(np.broadcast_to(c[:, None, :], vals.shape)[mask])
+        data_vals.append(vals[mask])
+    prior_residual, prior_jacobian = problem.prior_system()
+    size = problem.unknowns().numel()
+    jacobian = sparse.coo_matrix((np.concatenate(data_vals), (np.concatenate(data_rows), np.concatenate(data_cols))),
+                                 shape=(4 * count, size)).tocsr()
+    return np.concatenate([residual, prior_residual]), sparse.vstack([jacobian, prior_jacobian]).tocsr()
+
+
+def levenberg_marquardt(problem, iterations: int = 15, tolerance: float = 1e-5) -> list[float]:
+    """Minimise ``problem()`` (an :class:`~fingersplat3d.align.solve.alignment_problem.AlignmentProblem`);
+    returns the loss after each accepted step."""
+    with torch.no_grad():
+        loss = float(problem())
+    history = [loss]
+    damping = 1e-4
+    for _ in range(iterations):
+        residual, jacobian = _system(problem)
+        hessian = (jacobian.T @ jacobian).toarray()
+        gradient = jacobian.T @ residual
+        diagonal = np.diag(hessian).copy()
+        active = diagonal > 0
+        if not active.any():
+            break
+        start = problem.unknowns().clone()
+        improved = False
+        for _ in range(8):
+            system = hessian[np.ix_(active, active)] + np.diag(damping * diagonal[active] + 1e-12)
+            try:
+                step = np.linalg.solve(system, -gradient[active])
+            except np.linalg.LinAlgError:
+                damping *= 10
+                continue
+            update = np.zeros_like(diagonal)
+            update[active] = step
+            problem.set_unknowns(start + torch.as_tensor(update, dtype=start.dtype))
+            with torch.no_grad():
+                trial = float(problem())
+            if np.isfinite(trial) and trial < loss:
+                improved = True
+                damping = max(damping / 3.0, 1e-9)
+                break
+            damping *= 4.0
+        if not improved:
+            problem.set_unknowns(start)
+            break
+        decrease = (loss - trial) / max(abs(loss), 1e-300)
+        loss = trial
+        history.append(loss)
+        if decrease < tolerance:
+            break
+    return history

@@ -1,0 +1,79 @@
+"""Levenberg-Marquardt of the global alignment: its hand-built Jacobian against autograd, and what it solves."""
+import numpy as np
+import pytest
+import torch
+
+from fingersplat3d.align.solve.global_opt import (GlobalAlignConfig, alignment_problem, field_grids, global_align,
+                                                  reached, spanning_tree)
+from fingersplat3d.align.solve.levenberg import _system, levenberg_marquardt
+from fingersplat3d.eval import relative_rotation_errors
+from fingersplat3d.synth import SynthConfig, synthesize
+
+from test_global_opt import _exact_pair
+
+
+@pytest.fixture(scope="module")
+def capture():
+    return synthesize(0, SynthConfig(size=(320, 256))).capture
+
+
+def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3):
+    from fingersplat3d.align.solve import global_opt
+
+    rng = np.random.default_rng(seed)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=tilt, noise_px=noise_px), _exact_pair(capture, 1, 2, rng, tilt=tilt, noise_px=noise_px),
+             _exact_pair(capture, 0, 2, rng, tilt=tilt, noise_px=noise_px)]
+    depths = [v.depth * (1.0 + 0.1 * np.sin(np.arange(v.width) / 40.0))[None, :] for v in capture.views]  # a shape to correct
+    focal = np.full(3, capture.views[0].camera.K[0, 0])
+    root, tree = spanning_tree(3, pairs)
+    aligned = reached(3, root, tree)
+    scene = float(np.nanmedian(depths[root]))
+    rotations, translations, log_scales = global_opt._chain(3, root, tree, pairs, scene)
+    grids = field_grids(depths, config)
+    rng = np.random.default_rng(seed + 1)
+    initial = global_opt.InitialState(rotations, translations, log_scales, np.full(3, 0.1), np.log(focal) + 0.05,
+                                      [rng.normal(0, 0.05, g.size) for g in grids])
+    problem, _ = alignment_problem(depths, focal, pairs, config, grids, initial, aligned, root)
+    with torch.no_grad():
+        problem.omega.add_(torch.as_tensor(rng.normal(0, 0.01, problem.omega.shape)))
+    return problem, pairs, depths, focal
+
+
+@pytest.mark.gradcheck
+@pytest.mark.parametrize("shared", [True, False])
+def test_the_built_jacobian_gives_the_loss_gradient(capture, shared):
+    """2 J^T r (the IRLS system) equals autograd's gradient of the true loss, every unknown included."""
+    config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared)
+    problem, *_ = _problem(capture, config, noise_px=2.0)  # residuals on both sides of the Cauchy scale
+    residual, jacobian = _system(problem)
+    problem.zero_grad()
+    problem().backward()
+    expected = torch.cat([(p.grad if p.grad is not None else torch.zeros_like(p)).reshape(-1)
+                          for p in (problem.omega, problem.translation, problem.log_scale, problem.log_alpha,
+                                    problem.log_focal, problem.field)]).numpy()
+    built = 2.0 * (jacobian.T @ residual)  # the root's pose (the gauge) has no column: both are 0 there
+    assert np.isfinite(residual).all() and np.abs(expected).max() > 0
+    assert np.allclose(built, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+
+
+def test_the_step_lowers_the_loss_and_recovers_the_rotations(capture):
+    config = GlobalAlignConfig()
+    problem, *_ = _problem(capture, config, tilt=0.05)
+    with torch.no_grad():
+        before = float(problem())
+    history = levenberg_marquardt(problem, iterations=15)
+    assert history[0] == pytest.approx(before) and all(b <= a for a, b in zip(history, history[1:]))
+    assert history[-1] < 0.5 * before
+
+
+def test_lm_and_lbfgs_agree_where_both_converge(capture):
+    rng = np.random.default_rng(0)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03)]
+    depths = [v.depth for v in capture.views]
+    focal = capture.views[0].camera.K[0, 0]
+    truth = [v.camera.world_to_cam for v in capture.views]
+    lm = global_align(depths, focal, pairs, GlobalAlignConfig())
+    lbfgs = global_align(depths, focal, pairs, GlobalAlignConfig(solver="lbfgs", iterations=150, polish_iterations=1000))
+    assert np.max(relative_rotation_errors(lm.world_to_cam, truth)) < 1.0
+    assert np.max(relative_rotation_errors(lm.world_to_cam, lbfgs.world_to_cam)) < 0.3
+    assert lm.loss_history[-1] <= lbfgs.loss_history[-1] * 1.01
