@@ -33,6 +33,7 @@ __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reco
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
+MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
 
 
 @dataclass(frozen=True)
@@ -237,6 +238,15 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
         status.update(ok=False, reason=f"global alignment residual {alignment.residual_px:.1f} px")
         _warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than {MAX_RESIDUAL_PX:g} px): "
                       "the cameras are probably wrong")
+    if alignment.turn_uncertainty_deg is not None:
+        sigma = alignment.turn_uncertainty_deg
+        status["turn_uncertainty_deg"] = {f"{names[a]}-{names[b]}": round(float(sigma[a, b]), 3)
+                                          for a in range(len(names)) for b in range(a + 1, len(names)) if np.isfinite(sigma[a, b])}
+        loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
+        if loose:
+            _warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
+                  + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
+                  "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)")
     return status
 
 

@@ -77,3 +77,29 @@ def test_lm_and_lbfgs_agree_where_both_converge(capture):
     assert np.max(relative_rotation_errors(lm.world_to_cam, truth)) < 1.0
     assert np.max(relative_rotation_errors(lm.world_to_cam, lbfgs.world_to_cam)) < 0.3
     assert lm.loss_history[-1] <= lbfgs.loss_history[-1] * 1.01
+
+
+def test_turn_uncertainty_is_symmetric_and_grows_with_the_noise(capture):
+    from fingersplat3d.align.solve.levenberg import turn_uncertainty_deg
+
+    sigmas = []
+    for noise in (0.2, 2.0):
+        problem, *_ = _problem(capture, GlobalAlignConfig(), noise_px=noise)
+        levenberg_marquardt(problem, iterations=15)
+        sigma = turn_uncertainty_deg(problem, [True, True, True])
+        assert np.isnan(np.diag(sigma)).all() and np.allclose(sigma, sigma.T, equal_nan=True)
+        off = sigma[~np.eye(3, dtype=bool)]
+        assert np.isfinite(off).all() and (off > 0).all()
+        sigmas.append(off)
+    assert (sigmas[1] > 2 * sigmas[0]).all()  # ten times the pixel noise: a much less sure turn
+    assert np.isnan(turn_uncertainty_deg(problem, [True, True, False])[0, 2])
+
+
+def test_fuse_reports_the_turn_uncertainty_of_every_pair(capture):
+    from fingersplat3d.pipeline import FuseConfig, fuse
+    from fingersplat3d.scene import Capture
+
+    blind = Capture(tuple(v.with_(camera=None, depth=None) for v in capture.views), capture.metadata)
+    report = fuse(blind, FuseConfig(splat=None)).report["alignment"]
+    assert set(report["turn_uncertainty_deg"]) == {"left-center", "left-right", "center-right"}
+    assert all(0 < value < 5 for value in report["turn_uncertainty_deg"].values())

@@ -81,7 +81,9 @@ def score_geometry(result, truth: dict) -> dict:
     return {"rotation_error_deg": float(np.median(rotations)), "rotation_mean_deg": float(np.mean(rotations)),
             "rotation_max_deg": float(np.max(rotations)),
             "depth_mae_mm": float(np.mean(depths)), "depth_worst_view_mm": float(np.max(depths)),
-            "registered_all": bool(all(result.report["alignment"]["aligned"].values()))}
+            "registered_all": bool(all(result.report["alignment"]["aligned"].values())),
+            "turn_uncertainty_max_deg": max(result.report["alignment"].get("turn_uncertainty_deg", {}).values(),
+                                            default=float("nan"))}
 
 
 def _measure_case(case: GeometryCase, capture_paths: list[str], config) -> list[dict]:

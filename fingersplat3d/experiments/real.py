@@ -102,6 +102,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
               "seconds": seconds, "peak_rss_mb": peak_rss_mb(),
               "registered": int(sum(report["alignment"]["aligned"].values())),
               "focal": float(report["alignment"]["focals_px"][0]), "residual_px": report["alignment"].get("residual_px"),
+              "turn_uncertainty_deg": report["alignment"].get("turn_uncertainty_deg", {}),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
               "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))

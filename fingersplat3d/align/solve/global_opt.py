@@ -22,7 +22,7 @@ relative rotations 4-8 degrees off; the fields, solved to convergence, 0.3-0.9 d
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -34,7 +34,7 @@ from ...device import single_threaded
 from ...sampling import sample_bilinear
 from .alignment_problem import AlignmentProblem, Correspondences, InitialState
 from .depth_field import FieldGrid
-from .levenberg import levenberg_marquardt
+from .levenberg import levenberg_marquardt, turn_uncertainty_deg
 from .optimize import minimize
 
 __all__ = ["PairCorrespondences", "GlobalAlignConfig", "GlobalAlignment", "global_align", "spanning_tree", "reached",
@@ -112,6 +112,9 @@ class GlobalAlignment:
     root: int
     fields: list[np.ndarray] = field(default_factory=list)
     loss_history: list[float] = field(default_factory=list)
+    turn_uncertainty_deg: np.ndarray | None = None
+    """``[N, N]``: each view pair's rotation uncertainty from the fit's curvature (degrees; NaN for a view
+    not aligned), where the solver gives one (Levenberg-Marquardt); None otherwise."""
 
     @property
     def world_to_cam(self) -> list[np.ndarray]:
@@ -222,14 +225,17 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
                                [np.zeros(g.size) for g in grids])
     problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root)
     with single_threaded():  # a few thousand residuals: threads only add hand-offs
+        uncertainty = None
         if not len(data.weight):
             history = []
         elif config.solver == "lm":
             history = levenberg_marquardt(problem, config.lm_iterations)
+            uncertainty = turn_uncertainty_deg(problem, aligned)
         else:
             history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
                                config.polish_rounds)
-    return alignment_result(problem, depths, grids, data, root, tree, aligned, history)
+    result = alignment_result(problem, depths, grids, data, root, tree, aligned, history)
+    return replace(result, turn_uncertainty_deg=uncertainty)
 
 
 def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: Sequence[PairCorrespondences],

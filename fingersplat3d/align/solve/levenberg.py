@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
-__all__ = ["levenberg_marquardt"]
+__all__ = ["levenberg_marquardt", "turn_uncertainty_deg"]
 
 
 def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
@@ -106,3 +106,28 @@ def levenberg_marquardt(problem, iterations: int = 15, tolerance: float = 1e-5) 
         if decrease < tolerance:
             break
     return history
+
+
+def turn_uncertainty_deg(problem, aligned) -> np.ndarray:
+    """``[N, N]`` degrees: the standard deviation of each view pair's relative rotation, in its least sure
+    direction, from the curvature of the solved problem (Gauss-Newton covariance ``s^2 (J^T J)^-1``,
+    ``s^2`` the residual variance), every other unknown marginalised out: the turn, the relief and the
+    focal trading against each other shows as a large value. NaN where a view is not ``aligned`` (the
+    root is aligned and is the gauge: its rotation has no variance of its own)."""
+    residual, jacobian = _system(problem)
+    hessian = (jacobian.T @ jacobian).toarray()
+    active = np.diag(hessian) > 0
+    variance = float(residual @ residual) / max(jacobian.shape[0] - int(active.sum()), 1)
+    covariance = np.zeros_like(hessian)
+    covariance[np.ix_(active, active)] = variance * np.linalg.pinv(hessian[np.ix_(active, active)], hermitian=True)
+    n = problem.medians.shape[0]
+    solved = [bool(a) for a in aligned]
+    result = np.full((n, n), np.nan)
+    for a in range(n):
+        for b in range(n):
+            if a == b or not (solved[a] and solved[b]):
+                continue
+            ia, ib = slice(3 * a, 3 * a + 3), slice(3 * b, 3 * b + 3)
+            block = covariance[ia, ia] + covariance[ib, ib] - covariance[ia, ib] - covariance[ib, ia]
+            result[a, b] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(block).max(), 0.0))))
+    return result
