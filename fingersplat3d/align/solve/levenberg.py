@@ -30,7 +30,7 @@ def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     names = list(local)
     with torch.no_grad():
         rows = problem.row_residuals(**local)  # [M, 4] whitened
-    columns = problem.row_columns()  # name -> ([M, k, c] int column indices, [M, k, c] weights) or None
+    columns = problem.row_columns()  # name -> ([M, k, C] column indices, -1 where fixed; [M, k, C] weights)
     e = torch.stack([(rows[:, :2] ** 2).sum(1), (rows[:, 2:] ** 2).sum(1)], 1)  # [M, 2]
     irls = torch.sqrt(problem.weight[:, None] / (problem.robust_px ** 2 + e))  # [M, 2]
     scale = irls.repeat_interleave(2, dim=1)  # [M, 4]
