@@ -149,8 +149,7 @@ class AlignmentProblem(torch.nn.Module):
         """Depth of view ``view``'s surface at pointmap depth ``z`` with field basis ``(index, weight)``."""
         scales = self.scales() if scales is None else scales
         field = (self.field[index] * weight).sum(-1) if self.field.numel() else torch.zeros_like(z)
-        median = self.medians[view]
-        return scales[view] * (median + torch.exp(self.log_alphas()[view]) * (z - median) + self.reliefs[view] * field)
+        return _surface_depth(scales[view], self.log_alphas()[view], self.medians[view], self.reliefs[view], z, field)
 
     def _world_points(self, cameras: tuple, view: torch.Tensor, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         rotations, translations, focals = cameras
@@ -188,8 +187,7 @@ class AlignmentProblem(torch.nn.Module):
         """The values each correspondence reads, per end: ``[M, k]`` tensors (``f_*``: its field value)."""
         with torch.no_grad():
             omega, translations = self.omega * self.free[:, None], self.translations()
-            log_scales = self.log_scale * self.free + self.base_log_scale * (1 - self.free)
-            log_alphas, log_focals = self.log_alphas(), torch.log(self.focals())
+            log_scales, log_alphas, log_focals = torch.log(self.scales()), self.log_alphas(), torch.log(self.focals())
             values = {}
             for end in ("a", "b"):
                 view = getattr(self, f"view_{end}")
@@ -206,9 +204,8 @@ class AlignmentProblem(torch.nn.Module):
         for end, omega, t, ls, la, lf, f in (("a", omega_a, t_a, ls_a, la_a, lf_a, f_a), ("b", omega_b, t_b, ls_b, la_b, lf_b, f_b)):
             view = getattr(self, f"view_{end}")
             rotation = axis_angle_to_matrix(omega) @ self.base_rotation[view]
-            median = self.medians[view]
-            depth = torch.exp(ls[:, 0]) * (median + torch.exp(la[:, 0]) * (getattr(self, f"z_{end}") - median)
-                                           + self.reliefs[view] * f[:, 0])
+            depth = _surface_depth(torch.exp(ls[:, 0]), la[:, 0], self.medians[view], self.reliefs[view],
+                                   getattr(self, f"z_{end}"), f[:, 0])
             ends[end] = (rotation, t, torch.exp(lf[:, 0]), self.centres[view], depth)
         x_a = _lift(*ends["a"][:4], self.uv_a, ends["a"][4])
         x_b = _lift(*ends["b"][:4], self.uv_b, ends["b"][4])
@@ -305,6 +302,11 @@ class AlignmentProblem(torch.nn.Module):
         guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
         return loss + self.focal_prior * ((self.log_focal - guess) ** 2).sum()
 
+
+
+def _surface_depth(scale, log_alpha, median, relief, z, field) -> torch.Tensor:
+    """A view's surface depth at pointmap depth ``z`` (the module docstring's ``depth_v``), per row."""
+    return scale * (median + torch.exp(log_alpha) * (z - median) + relief * field)
 
 
 def _lift(rotation, translation, focal, centre, uv, depth) -> torch.Tensor:
