@@ -34,8 +34,8 @@ import time
 from pathlib import Path
 
 from fingersplat3d.eval.machine import machine
-from fingersplat3d.experiments.bench import HELD_OUT, synth_captures
-from fingersplat3d.experiments.geometry import RING_VIEWS
+from fingersplat3d.experiments.bench import HELD_OUT
+from fingersplat3d.experiments.geometry import RING_VIEWS, synth_captures
 from fingersplat3d.experiments.process import peak_rss_mb
 
 TRAIN = RING_VIEWS[3]
@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.first_seed, args.first_seed + (1 if args.quick else args.seeds)))
     results = {}
     with tempfile.TemporaryDirectory() as folder:
-        captures = [str(p) for p in synth_captures(seeds, Path(folder), (640, 512))]
+        captures = [str(p) for p in synth_captures(seeds, Path(folder), (640, 512), "ring")]
         for name in args.presets.split(","):
             command = [sys.executable, __file__, "--worker", name, json.dumps(captures)]
             command += [f"--set={item}" for item in args.set] + (["--bound"] if args.bound else [])

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .geometry import RING_ANGLES, RING_VIEWS, score_geometry
+from .geometry import RING_ANGLES, RING_VIEWS, score_geometry, synth_captures
 from .process import in_fresh_process, peak_rss_mb
 from .tables import write_rows
 
@@ -146,20 +146,6 @@ def run_real(scale: float, data: str) -> dict:
     return {k: v for k, v in summarize_real(records).items() if k != "rig"}
 
 
-def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int]) -> list[Path]:
-    import pickle
-
-    from ..synth import SynthConfig, synthesize
-
-    paths = []
-    for seed in seeds:
-        result = synthesize(seed, SynthConfig(rig="ring", angles=RING_ANGLES, size=size))
-        path = folder / f"seed{seed}.pkl"
-        path.write_bytes(pickle.dumps(result.capture))
-        paths.append(path)
-    return paths
-
-
 def run_bench(settings: list[Setting], seeds: list[int], out: Path, *, size: tuple[int, int] = (640, 512),
               real: Path | None = None, device: str = "auto", progress: bool = True) -> dict:
     """Every setting on every seed (and the real captures per geometry setting); writes the files."""
@@ -171,7 +157,7 @@ def run_bench(settings: list[Setting], seeds: list[int], out: Path, *, size: tup
 
     rows, real_rows = [], {}
     with tempfile.TemporaryDirectory() as scratch:
-        captures = synth_captures(seeds, Path(scratch), size)
+        captures = synth_captures(seeds, Path(scratch), size, "ring")
         jobs = [(s, seed, path) for s in settings for seed, path in zip(seeds, captures)]
         for setting, seed, path in tqdm(jobs, desc="fs3d bench", unit="fuse", disable=not progress):
             row = {**asdict(setting), "seed": seed}

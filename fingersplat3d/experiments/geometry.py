@@ -23,7 +23,7 @@ import numpy as np
 
 from .process import in_fresh_process, peak_rss_mb
 
-__all__ = ["GeometryCase", "CASES", "RING_ANGLES", "RING_VIEWS", "pick_views", "score_geometry", "run_geometry",
+__all__ = ["GeometryCase", "CASES", "RING_ANGLES", "RING_VIEWS", "pick_views", "score_geometry", "synth_captures", "run_geometry",
            "geometry_table"]
 
 RING_ANGLES = (-45.0, -22.5, 0.0, 22.5, 45.0)
@@ -86,6 +86,22 @@ def score_geometry(result, truth: dict) -> dict:
                                             default=float("nan"))}
 
 
+def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str) -> list[Path]:
+    """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`), pickled into
+    ``folder`` for measurements that run in other processes."""
+    import pickle
+
+    from ..synth import SynthConfig, synthesize
+
+    options = {"angles": RING_ANGLES} if rig == "ring" else {}
+    paths = []
+    for seed in seeds:
+        path = folder / f"{rig}-{size[0]}x{size[1]}-{seed}.pkl"
+        path.write_bytes(pickle.dumps(synthesize(seed, SynthConfig(rig=rig, size=size, **options)).capture))
+        paths.append(path)
+    return paths
+
+
 def _measure_case(case: GeometryCase, capture_paths: list[str], config) -> list[dict]:
     """Every seed of one case, fused and scored (runs in its own process)."""
     import pickle
@@ -116,25 +132,17 @@ def _measure_case(case: GeometryCase, capture_paths: list[str], config) -> list[
 
 def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progress: bool = True) -> list[dict]:
     """Rows of :func:`score_geometry` per case and seed; each case in a fresh process, captures made once."""
-    import pickle
     import tempfile
 
     from tqdm import tqdm
 
     from ..pipeline import FuseConfig
-    from ..synth import SynthConfig, synthesize
 
     config = config or FuseConfig(splat=None)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        paths: dict[tuple, list[str]] = {}
-        for rig, size in dict.fromkeys(case.synth_key for case in cases):
-            options = {"angles": RING_ANGLES} if rig == "ring" else {}
-            for seed in seeds:
-                capture = synthesize(seed, SynthConfig(rig=rig, size=size, **options)).capture
-                path = Path(scratch) / f"{rig}-{size[0]}-{seed}.pkl"
-                path.write_bytes(pickle.dumps(capture))
-                paths.setdefault((rig, size), []).append(str(path))
+        paths = {(rig, size): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig)]
+                 for rig, size in dict.fromkeys(case.synth_key for case in cases)}
         for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
             rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
     return rows
