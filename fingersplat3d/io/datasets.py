@@ -163,13 +163,18 @@ def load_uwa(folder_or_files: str | Path | Iterable[str | Path], subject: object
         paths = [group.frames[frame] for frame in wanted]
         images = _read_views(paths, gray)
         names = [f"f{frame}" for frame in wanted]
-        metadata = {"dataset": "uwa", "subject": group.subject, "finger": group.finger, "capture": group.capture,
-                    "session": group.session, "name": group.stem,
-                    "sources": {name: str(path) for name, path in zip(names, paths)},
-                    "lighting": {name: "plain" if frame in UWA_VIEW_FRAMES else "structured"
-                                 for name, frame in zip(names, wanted)}}
+        metadata = _uwa_metadata(group, wanted)
         captures.append(Capture(tuple(View(name, image) for name, image in zip(names, images)), metadata))
     return captures
+
+
+def _uwa_metadata(group: UWAGroup, frames: Sequence[int]) -> dict:
+    """A UWA capture's metadata; its views are ``f<frame>`` for ``frames``, in that order."""
+    names = [f"f{frame}" for frame in frames]
+    return {"dataset": "uwa", "subject": group.subject, "finger": group.finger, "capture": group.capture,
+            "session": group.session, "name": group.stem,
+            "sources": {name: str(group.frames[frame]) for name, frame in zip(names, frames)},
+            "lighting": {name: "plain" if frame in UWA_VIEW_FRAMES else "structured" for name, frame in zip(names, frames)}}
 
 
 # ----------------------------------------------------------------------------------------- CFPose
@@ -285,20 +290,18 @@ def _files_as_given(files: list[Path], gray: bool | None) -> Capture:
     cfpose = [_CFPOSE_NAME.match(path.stem) for path in files]
     if all(uwa) and len({(m["subject"], m["finger"], m["capture"], m["session"]) for m in uwa}) == 1 \
             and len({int(m["frame"]) for m in uwa}) == len(files):
+        frames = [int(m["frame"]) for m in uwa]
+        names = [f"f{frame}" for frame in frames]
         first = uwa[0]
-        names = [f"f{int(m['frame'])}" for m in uwa]
-        stem = "_".join(first[key] for key in ("subject", "finger", "capture", "session") if first[key] is not None)
-        metadata = {"dataset": "uwa", "subject": first["subject"], "finger": first["finger"],
-                    "capture": first["capture"], "session": first["session"], "name": stem,
-                    "lighting": {name: "plain" if int(m["frame"]) in UWA_VIEW_FRAMES else "structured"
-                                 for name, m in zip(names, uwa)}}
+        group = UWAGroup(first["subject"], first["finger"], first["capture"], first["session"], dict(zip(frames, files)))
+        metadata = _uwa_metadata(group, frames)
     elif all(cfpose) and len({m["finger"] for m in cfpose}) == 1 and len({int(m["pose"]) for m in cfpose}) == len(files):
         names = [f"p{int(m['pose'])}" for m in cfpose]
-        metadata = {"dataset": "cfpose", "finger": cfpose[0]["finger"], "poses": [int(m["pose"]) for m in cfpose]}
+        metadata = {"dataset": "cfpose", "finger": cfpose[0]["finger"], "poses": [int(m["pose"]) for m in cfpose],
+                    "sources": {name: str(path) for name, path in zip(names, files)}}
     else:
         return capture
-    views = tuple(replace(view, name=name) for view, name in zip(capture.views, names))
-    return Capture(views, {**metadata, "sources": {name: str(path) for name, path in zip(names, files)}})
+    return Capture(tuple(replace(view, name=name) for view, name in zip(capture.views, names)), metadata)
 
 
 def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = None) -> list[Capture]:
