@@ -170,7 +170,8 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
     if pair_pointmaps is None:
         registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig)
         report["pairs"] = registration.pairs + identical
-        report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds}
+        report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds,
+                                  "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)}}
         return registration.alignment
     if rig is not None:
         raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "

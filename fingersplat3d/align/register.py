@@ -31,6 +31,7 @@ import numpy as np
 
 from ..pointmaps.base import Pointmap
 from ..scene import View
+from ..segment.silhouette import TIP_BASES, orient_frames
 from .correspond.chart import CylinderChart
 from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
 from .correspond.epipolar import fundamental_inliers
@@ -81,6 +82,8 @@ class Registration:
     rounds: int
     correspondences: list[PairCorrespondences] = field(default_factory=list)
     """The verified correspondences the final alignment was fitted to (what a rig calibration pools)."""
+    tips: list[dict] = field(default_factory=list)
+    """Per view, the end taken for the fingertip: ``side`` (of the image) and ``why`` (in words)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,8 +157,12 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     prepared = _prepare(views)
     records = {pair: {"a": views[pair[0]].name, "b": views[pair[1]].name, "ok": False, "reason": "", "matches": []}
                for pair in pairs}
+    # One tip end for the whole capture: on crops cut at both ends a view's own choice can disagree
+    # with the others', and charts running opposite ways share no turn.
+    frames = orient_frames(prepared.masks)
+    tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]} for frame in frames]
     if config.matcher == "surface":
-        charts = [CylinderChart.from_mask(mask) for mask in prepared.masks]
+        charts = [CylinderChart.from_frame(frame) for frame in frames]
         step = max(1.0, prepared.period / 8.0)
         unwrapped = [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, prepared.textures, prepared.masks)]
     rng = np.random.default_rng(config.seed)
@@ -211,4 +218,4 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         say(f"global alignment, round {rounds}")
         alignment = align(depths, focals, refined, config.global_align, previous=alignment)
         fitted = refined
-    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted)
+    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips)

@@ -4,7 +4,9 @@ A distal phalanx is close to a *generalised cylinder*: a cross-section swept alo
 straight axis, shrinking over the fingertip cap. Its silhouette is described by
 
 * the axis: the principal direction of the mask pixels, oriented toward the fingertip (the end
-  of the silhouette that the image border does not cut; see :func:`silhouette_frame`);
+  of the silhouette that the image border does not cut; on a crop cut at both ends, the end the
+  finger narrows toward, agreed over all views of a capture; see :func:`silhouette_frame` and
+  :func:`orient_frames`);
 * at every 1-pixel station ``s`` along the axis, the chord across the silhouette: half-width
   ``w(s)`` and centre ``c(s)`` in the across coordinate ``t``; chords cut by the image border are
   completed from their neighbours (the finger goes on beyond the frame), both are median filtered
@@ -21,7 +23,15 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import savgol_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame"]
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames",
+           "TIP_BASES"]
+
+TIP_BASES = {
+    "outline": "the outline closes at this end and the image border cuts the other",
+    "taper": "neither end is told apart by the outline; the finger narrows toward this end",
+    "other views": "neither end is told apart by the outline; this end points the way of the tip in the other views",
+}
+"""How the tip end of a silhouette was chosen (:attr:`SilhouetteFrame.tip_basis`), in words."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,8 +129,21 @@ class SilhouetteFrame:
     s_tip: float
     """Axis coordinate of the tip end of the silhouette."""
     tip_found: bool
-    """Whether one end was told apart as the tip (False: both or neither end is cut by the border,
-    and the axis keeps the direction of larger mask extent)."""
+    """Whether one end was told apart as the tip by the outline (False: both or neither end is cut
+    by the border; the tip is then the end the finger narrows toward, or the other views' way)."""
+    taper: float = 0.0
+    """How much the chord narrows toward the tip over the silhouette's length, as a share of its
+    median width (straight line fitted to the middle 80 % of stations; ~0.2 on a distal phalanx)."""
+    tip_basis: str = "outline"
+    """Which rule chose the tip end: a key of :data:`TIP_BASES`."""
+
+    @property
+    def tip_side(self) -> str:
+        """The image side the tip points to: ``top``, ``bottom``, ``left`` or ``right``."""
+        du, dv = self.axis
+        if abs(dv) >= abs(du):
+            return "top" if dv < 0 else "bottom"
+        return "left" if du < 0 else "right"
 
     def coordinates(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Axis ``s`` and across ``t`` coordinates of pixels ``uv [..., 2]``."""
@@ -133,14 +156,28 @@ class SilhouetteFrame:
         return self.origin + s[..., None] * self.axis + t[..., None] * self.normal
 
 
-def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15) -> SilhouetteFrame:
+def _taper(sections: Sections) -> float:
+    """Narrowing of the chord toward increasing ``s`` over the whole length, per median width (the
+    middle 80 % of stations: the ends of a crop cut askew are slivers, not the finger's width)."""
+    width = sections.half_width
+    count = width.size
+    low, high = count // 10, count - count // 10
+    if high - low < 3:
+        return 0.0
+    slope = np.polyfit(np.arange(low, high, dtype=np.float64), width[low:high], 1)[0]
+    return float(-slope * count / max(float(np.median(width)), 1e-9))
+
+
+def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarray | None = None) -> SilhouetteFrame:
     """The axis frame and chord sections of a finger mask (see the module docstring).
 
-    The tip is the end of the silhouette whose last stations do not touch the image border; when
-    both or neither touch, the end with the narrower chords is taken. The axis points to the tip
-    (increasing ``s``). The sign of the
-    axis fixes the sign of ``normal``, so two views of one finger from cameras turned about it get
-    frames that agree: their surface angles (:mod:`fingersplat3d.align.correspond.chart`) differ by the turn.
+    The tip is the end of the silhouette whose last stations do not touch the image border. When
+    both or neither touch (a crop cut at both ends, a finger wholly in frame), it is the end that
+    ``toward`` (an image direction) points to when given, else the end the chords narrow toward
+    (a distal phalanx tapers by ~20 % to its tip). The axis points to the tip (increasing ``s``). The
+    sign of the axis fixes the sign of ``normal``, so two views of one finger from cameras turned
+    about it get frames that agree: their surface angles (:mod:`fingersplat3d.align.correspond.chart`)
+    differ by the turn.
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
@@ -159,12 +196,40 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15) -> SilhouetteFra
     cut_low = bool(np.any(on_border & (s < s.min() + end)))
     cut_high = bool(np.any(on_border & (s > s.max() - end)))
     tip_found = cut_low != cut_high
+    taper = _taper(sections)
     if tip_found:
-        flip = cut_high  # the high end is cut by the frame: the tip is at the low end
+        flip, basis = cut_high, "outline"  # the high end is cut by the frame: the tip is at the low end
+    elif toward is not None:
+        flip, basis = float(np.dot(axis, toward)) < 0.0, "other views"
     else:
-        tail = max(1, sections.half_width.size // 10)
-        flip = float(np.mean(sections.half_width[:tail])) < float(np.mean(sections.half_width[-tail:]))
+        flip, basis = taper < 0.0, "taper"
     if flip:
         axis = -axis
         s, normal, sections = chords(axis)
-    return SilhouetteFrame(axis, normal, origin, sections, float(s.max()) + 0.5, tip_found)
+        taper = -taper
+    return SilhouetteFrame(axis, normal, origin, sections, float(s.max()) + 0.5, tip_found, taper, basis)
+
+
+def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[SilhouetteFrame]:
+    """The frames of the views of one capture, their tips agreeing wherever one view cannot tell.
+
+    A view whose outline shows the tip keeps it. The others point their axes the way of the tip in
+    the views that show it; when none does (a capture of crops cut at both ends), the way the views'
+    tapers agree on, each weighted by how clearly it tapers. Cameras turned about a finger see its
+    axis the same way round, and one view's taper can be lost in the noise of its outline where the
+    capture's is not.
+    """
+    frames = [silhouette_frame(mask, smoothing) for mask in masks]
+    seen = [frame for frame in frames if frame.tip_found]
+    if len(seen) == len(frames):
+        return frames
+    toward = sum(frame.axis for frame in seen) if seen else sum(frame.axis * abs(frame.taper) for frame in frames)
+    if float(np.linalg.norm(toward)) < 1e-9:
+        return frames
+    oriented = []
+    for mask, frame in zip(masks, frames):
+        if frame.tip_found or (not seen and float(np.dot(frame.axis, toward)) > 0.0):
+            oriented.append(frame)  # its own outline or its own taper already agrees
+        else:
+            oriented.append(silhouette_frame(mask, smoothing, toward=toward))
+    return oriented

@@ -56,7 +56,11 @@ class CylinderChart:
 
     @classmethod
     def from_mask(cls, mask: np.ndarray) -> "CylinderChart":
-        frame = silhouette_frame(mask)
+        return cls.from_frame(silhouette_frame(mask))
+
+    @classmethod
+    def from_frame(cls, frame: SilhouetteFrame) -> "CylinderChart":
+        """The chart of a silhouette frame (e.g. one of :func:`~fingersplat3d.segment.silhouette.orient_frames`)."""
         return cls(frame, float(np.median(frame.sections.half_width)))
 
     def surface(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,76 @@
+"""Which end of a silhouette is the fingertip: the outline, the taper, and the views of one capture agreeing."""
+import numpy as np
+import pytest
+
+from fingersplat3d.segment.silhouette import TIP_BASES, orient_frames, silhouette_frame
+
+
+def crop(rows=300, cols=240, top=60, bottom=90, shift=0.0):
+    """A finger crop cut at both ends by the image border: a vertical band whose half-width grows from
+    ``top`` (first row) to ``bottom`` (last row), its centre moved ``shift`` pixels per row."""
+    v, u = np.mgrid[:rows, :cols]
+    half = top + (bottom - top) * v / (rows - 1)
+    return np.abs(u - (cols / 2 + shift * v)) <= half
+
+
+def capsule(rows=160, cols=400, radius=50, tip=80):
+    """A horizontal capsule cut by the right border, tip to the left."""
+    v, u = np.mgrid[:rows, :cols]
+    return ((np.abs(v - rows // 2) <= radius) & (u >= tip)) | ((u - tip) ** 2 + (v - rows // 2) ** 2 <= radius ** 2)
+
+
+def test_the_outline_names_the_tip_when_one_end_is_cut():
+    frame = silhouette_frame(capsule())
+    assert frame.tip_found and frame.tip_basis == "outline" and frame.tip_side == "left"
+
+
+@pytest.mark.parametrize("mask, side", [(crop(), "top"), (crop()[::-1], "bottom"), (crop(shift=0.1).T, "left")])
+def test_a_crop_cut_at_both_ends_takes_the_end_it_narrows_toward(mask, side):
+    frame = silhouette_frame(mask)
+    assert not frame.tip_found and frame.tip_basis == "taper" and frame.tip_side == side
+    assert 0.25 < frame.taper < 0.5  # 60 -> 90 px half-width: a third of the median width
+
+
+def test_askew_cut_ends_do_not_decide_the_tip():
+    """A crop cut straight across an inclined finger leaves sliver chords at both ends; they are not its width."""
+    frame = silhouette_frame(crop(shift=0.25))
+    assert frame.tip_side == "top" and frame.taper > 0.2
+
+
+def test_bevelled_corners_at_the_wide_end_do_not_decide_the_tip():
+    """A crop whose wide end has its corners cut away (the cut of a rendered 3D finger, a rounded phone
+    crop) is narrow over its last rows: the end rows alone would take it for the tip."""
+    mask = crop()
+    v, u = np.mgrid[:mask.shape[0], :mask.shape[1]]
+    mask &= np.abs(u - mask.shape[1] / 2) <= 90 - 1.6 * np.maximum(v - (mask.shape[0] - 40), 0)
+    frame = silhouette_frame(mask)
+    width = frame.sections.half_width
+    tenth = len(width) // 10  # stations run from the wide end to the tip
+    assert width[:tenth].mean() < width[-tenth:].mean()  # the trap: the wide end's last rows are the narrower
+    assert frame.tip_side == "top" and frame.taper > 0.1
+
+
+def test_views_of_one_capture_agree_on_the_tip():
+    clear_a, clear_b = crop(), crop(top=65, bottom=95)
+    unclear = crop(top=80, bottom=78)  # tapers the other way, barely: its own choice would be "bottom"
+    assert silhouette_frame(unclear).tip_side == "bottom"
+    frames = orient_frames([clear_a, unclear, clear_b])
+    assert [frame.tip_side for frame in frames] == ["top"] * 3
+    assert [frame.tip_basis for frame in frames] == ["taper", "other views", "taper"]
+    assert frames[1].taper < 0  # still said: it widens toward the end taken
+
+
+def test_a_seen_tip_outweighs_every_taper():
+    seen = capsule(rows=300, cols=240).T[::-1]  # vertical, cut by the top border: the tip is at the bottom
+    assert silhouette_frame(seen).tip_side == "bottom"
+    frames = orient_frames([crop(), seen])
+    assert [frame.tip_side for frame in frames] == ["bottom", "bottom"]
+    assert [frame.tip_basis for frame in frames] == ["other views", "outline"]
+    assert set(TIP_BASES) >= {frame.tip_basis for frame in frames}
+
+
+def test_frames_stay_finite_on_degenerate_masks():
+    for mask in (np.ones((50, 50), bool), np.pad(np.ones((3, 3), bool), 20), crop(top=70, bottom=70)):
+        frame = silhouette_frame(mask)
+        assert np.all(np.isfinite(frame.axis)) and np.isfinite(frame.taper) and frame.tip_side in {"top", "bottom", "left", "right"}
+    assert len(orient_frames([crop(top=70, bottom=70)] * 2)) == 2
