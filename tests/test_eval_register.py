@@ -113,6 +113,13 @@ def test_command_with_user_mates_and_bad_input(fused, tmp_path, capsys):
     code = main(["eval", "register", str(fused), "--pairs", "center:left", "--mates", str(mates), "-o", str(out)])
     rows = list(csv.DictReader(open(out / "register_errors.csv")))
     assert code in (0, 4) and {r["mates_source"] for r in rows} == {"csv"} and rows[0]["mates"] == "5"
+    # A pair without mates is not scored, yet still gets the mates-free warp check.
+    out = tmp_path / "partly"
+    main(["eval", "register", str(fused), "--pairs", "center:left,center:right", "--mates", str(mates), "-o", str(out)])
+    right = [r for r in csv.DictReader(open(out / "register_errors.csv")) if r["view_b"] == "right"]
+    assert len(right) == 1 and right[0]["status"] == "failed" and "no rows" in right[0]["reason"]
+    assert float(right[0]["warp_shift_px"]) < 2.0 and float(right[0]["warp_ncc"]) > 0.4
+    assert "Median ridge NCC over 2 pairs" in (out / "summary.md").read_text()
     assert main(["eval", "register", str(fused), "--pairs", "center:nope", "-o", str(tmp_path / "a")]) == EXIT_INPUT
     assert "no view named 'nope'" in capsys.readouterr().err
     assert main(["eval", "register", str(fused), "--pairs", "center", "-o", str(tmp_path / "b")]) == EXIT_INPUT

@@ -240,20 +240,23 @@ def evaluate_pair(rec: _Reconstruction, view_a: str, view_b: str, user: dict | N
                   out: Path) -> list[dict]:
     """The rows of one pair of views (one per method), its mates CSV and its picture."""
     base = {"reconstruction": rec.folder.name, "view_a": view_a, "view_b": view_b}
-    mates = _mates_for(rec, view_a, view_b, user, truth)
-    base.update(mates_source=mates.source, mates=len(mates.xy_a))
-    if len(mates.xy_a) < 3:
-        raise InputError(f"only {len(mates.xy_a)} mated minutiae from {mates.source} (at least 3 are needed to "
-                         "score the 2D baselines)")
+    check = {}  # needs no mates: every pair with both photos gets it, mates or not
+    if rec.photo_path(view_a) is not None and rec.photo_path(view_b) is not None:
+        check = warp_check(rec.photo(view_a), rec.photo(view_b), rec, view_a, view_b)
+    try:
+        mates = _mates_for(rec, view_a, view_b, user, truth)
+        base.update(mates_source=mates.source, mates=len(mates.xy_a))
+        if len(mates.xy_a) < 3:
+            raise InputError(f"only {len(mates.xy_a)} mated minutiae from {mates.source} (at least 3 are needed to "
+                             "score the 2D baselines)")
+    except FS3DError as error:
+        return [dict(base, status="failed", reason=str(error), **check)]
     errors, carried = _errors(mates, rec, view_a, view_b)
     stem = f"{rec.folder.name}__{view_a}__{view_b}"
     with open(out / "mates" / f"{stem}.csv", "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["x_a", "y_a", "x_b", "y_b", "x_3d", "y_3d"])
         writer.writerows(np.column_stack([mates.xy_a, mates.xy_b, carried]).round(3).tolist())
-    check = {}
-    if rec.photo_path(view_a) is not None and rec.photo_path(view_b) is not None:
-        check = warp_check(rec.photo(view_a), rec.photo(view_b), rec, view_a, view_b)
     if rec.photo_path(view_b) is not None:
         from ..eval.warp2d import BASELINES
 
@@ -338,6 +341,13 @@ def summary_markdown(rows: list[dict]) -> str:
         lines += ["", "The paper, on UWA with mates from a matcher (\"UWA*\"): " + ", ".join(
             f"{k} {v} px" for k, v in PAPER_FIGURES.items()) + ". Figures compare only at the same resolution and "
             "with mates from the same kind of source."]
+    checked = {(r["reconstruction"], r["view_a"], r["view_b"]): r for r in rows
+               if np.isfinite(float(r.get("warp_ncc", np.nan)))}
+    if checked:
+        lines += ["", "Warp check of every pair, mates or not (shift px, ridge NCC): " + "; ".join(
+            f"{key[0]} {key[1]} -> {key[2]}: {r['warp_shift_px']:.1f}, {r['warp_ncc']:.2f}" for key, r in sorted(checked.items())),
+            "", f"Median ridge NCC over {len(checked)} pairs: "
+            f"{np.median([r['warp_ncc'] for r in checked.values()]):.2f}."]
     failed = [r for r in rows if r["status"] != "done"]
     if failed:
         lines += ["", "Not scored:", ""] + [f"- {r['reconstruction']} {r['view_a']} -> {r['view_b']}"
