@@ -156,3 +156,21 @@ def test_every_link_of_the_readme_and_docs_resolves():
             assert resolved.exists(), f"{page.name}: link to {target} points at nothing"
             if anchor and resolved.suffix == ".md":
                 assert anchor in _anchors(resolved.read_text()), f"{page.name}: no heading for #{anchor} in {resolved.name}"
+
+
+def test_every_tool_script_imports():
+    """The benchmark and figure scripts import (what they take from the package and from each other still
+    exists): they are run by hand, so nothing else would notice a moved function."""
+    import importlib.util
+    import sys
+
+    tools = ROOT / "tools"
+    sys.path.insert(0, str(tools))
+    try:
+        for script in sorted(tools.glob("*.py")):
+            spec = importlib.util.spec_from_file_location(f"tool_{script.stem}", script)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            assert hasattr(module, "main"), f"{script.name} has no main()"
+    finally:
+        sys.path.remove(str(tools))

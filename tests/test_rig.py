@@ -114,3 +114,45 @@ def test_register_views_with_a_rig_tries_both_quarter_turns_of_a_portrait_view(r
     pointmaps = get_backend("prior").predict_views(views)
     alignment = register_views(views, pointmaps, rig=rig).alignment
     assert all(alignment.aligned) and alignment.residual_px < 3
+
+
+@pytest.mark.gradcheck
+@pytest.mark.parametrize("fixed_rig", [False, True])
+def test_the_chained_rig_jacobian_gives_the_joint_loss_gradient(registered, fixed_rig):
+    """2 J^T r of the rig's Levenberg-Marquardt system equals autograd's gradient of the joint loss over the rig's
+    poses, centres and focal, the capture scales and every capture's surfaces."""
+    import torch
+
+    from fingersplat3d.align.solve import rig as rig_module
+    from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
+    from fingersplat3d.align.solve.rig_levenberg import _layout, _sync, rig_system
+
+    captures, pooled = registered
+    config = GlobalAlignConfig()
+    start, turns = rig_module._initial_rig(pooled[:2], captures[0].names)
+    built = [rig_module._capture_problem(c, start, t, config, c.alignment) for c, t in zip(pooled[:2], turns)]
+    problem = rig_module.RigProblem([b[0] for b in built], start, turns, np.array([0.0, 0.05]), fixed_rig)
+    with torch.no_grad():
+        problem.center.add_(0.01)  # away from the start, where some gradients vanish
+    for capture in problem.problems:
+        for parameter in (capture.omega, capture.translation, capture.log_focal):
+            parameter.requires_grad_(True)
+    _sync(problem)
+    residual, jacobian = rig_system(problem, fixed_rig)
+    built_gradient = 2.0 * (jacobian.T @ residual)
+    problem.zero_grad()
+    problem().backward()
+    first, starts, size = _layout(problem)
+
+    def grad(p):
+        return np.zeros(p.numel()) if p.grad is None else p.grad.detach().numpy().reshape(-1)
+
+    expected = np.zeros(size)
+    if not fixed_rig:
+        expected[:first - len(problem.problems)] = np.concatenate([grad(problem.omega), grad(problem.center), grad(problem.log_focal)])
+    expected[first - len(problem.problems):first] = grad(problem.log_capture_scale)
+    for capture, begin in zip(problem.problems, starts):
+        own = np.concatenate([grad(capture.log_scale), grad(capture.log_alpha), grad(capture.field)])
+        expected[begin:begin + own.size] = own
+    assert np.isfinite(residual).all() and np.abs(expected).max() > 0
+    assert np.allclose(built_gradient, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())

@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_real import DEFAULT_DATA, _leave_one_out, texture_check  # tools/ is the script's folder
+from bench_real import DEFAULT_DATA  # tools/ is the script's folder
+
+from fingersplat3d.experiments.real import leave_one_view_out, texture_check
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -68,7 +70,7 @@ def real(data: Path) -> dict:
     from fingersplat3d.scene import Capture
 
     config = FuseConfig(splat=None)
-    fit = GlobalAlignConfig(polish_iterations=400, polish_rounds=3)
+    fit = GlobalAlignConfig()
     captures, pooled = {}, {}
     for job in list_jobs([data]):
         captures[job.name] = load_job(job)
@@ -95,7 +97,7 @@ def real(data: Path) -> dict:
         free_three, free_two = fuse(capture, config), fuse(two_capture, config)
         records.append({"capture": name, "registered": bool(three.registered), "residual_px": three.report["alignment"]["residual_px"],
                         "free_residual_px": free_three.report["alignment"]["residual_px"], "seconds": seconds,
-                        "rig_lovo": on_rig, "free_lovo": _leave_one_out(capture, free_three, free_two)})
+                        "rig_lovo": on_rig, "free_lovo": leave_one_view_out(free_three, free_two)})
         print(f"{name}: residual {records[-1]['residual_px']:.2f} px on the rig, texture NCC {on_rig.get('texture_ncc')} "
               f"(free {records[-1]['free_lovo']['texture_ncc']})", file=sys.stderr, flush=True)
     return {"rig": {"angles_deg": _pair_angles(everything.rig), "focal": everything.rig.focal, "used": everything.used,
@@ -119,7 +121,7 @@ def synthetic(seeds: int) -> dict:
     blind = [Capture(tuple(v.with_(camera=None, depth=None) for v in c.views), c.metadata) for c in truths]
     train = [register_capture(c, config) for c in blind[:-2]]
     start = time.perf_counter()
-    calibration = calibrate_rig(train, truths[0].names, GlobalAlignConfig(polish_iterations=400, polish_rounds=3))
+    calibration = calibrate_rig(train, truths[0].names, GlobalAlignConfig())
     fit_s = time.perf_counter() - start
     poses = [np.linalg.inv(v.camera.world_to_cam)[:3, :3] for v in truths[0].views]
     rig_error = [float(rotation_angle_deg(calibration.rig.rotations[v], poses[0].T @ poses[v])) for v in (1, 2)]

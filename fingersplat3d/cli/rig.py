@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from ..align.solve.global_opt import GlobalAlignConfig
@@ -67,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if len(names) != 1:
         raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
     start = time.perf_counter()
-    fit = replace(GlobalAlignConfig(), polish_iterations=400, polish_rounds=3)
+    fit = GlobalAlignConfig()  # Levenberg-Marquardt, as a single capture's alignment
     calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
     for round_ in range(args.rounds):  # re-match through the rig, fit again (its matches snap to the right ridges)
         used = [job for job in jobs if job.name in calibration.used]

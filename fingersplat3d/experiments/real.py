@@ -40,7 +40,9 @@ def _texture_seen_from(texture, depth, camera, target_camera, target_mask):
     return image, outside
 
 
-def _texture_check(two, camera2, view2) -> dict:
+def texture_check(two, camera2, view2) -> dict:
+    """Frames 0 and 1 of a two-view reconstruction ``two``, their ridge texture carried into ``camera2``: the share
+    outside ``view2``'s mask and the correlation with its own ridge texture (0: off by half a ridge period)."""
     from ..align.correspond.texture import estimate_ridge_period, ridge_texture
 
     period = estimate_ridge_period(view2.image, view2.mask)
@@ -59,7 +61,9 @@ def _texture_check(two, camera2, view2) -> dict:
     return {"outside_mask": float(np.mean(outside)), "texture_ncc": ncc}
 
 
-def _leave_one_out(three, two) -> dict:
+def leave_one_view_out(three, two) -> dict:
+    """:func:`texture_check` of a capture's frame 2, camera 2 resected by PnP from the three-view fuse ``three``
+    into the frame of the two-view fuse ``two`` (None where either did not register)."""
     import cv2
 
     from ..scene import Camera
@@ -82,7 +86,7 @@ def _leave_one_out(three, two) -> dict:
         return {"outside_mask": None, "texture_ncc": None}
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
-    return _texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
+    return texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
 
 
 def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
@@ -109,7 +113,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
                              for i in range(len(rotations)) for j in range(i + 1, len(rotations))}}
     if leave_one_out and len(capture) == 3:
         two = fuse(Capture(capture.views[:2], capture.metadata), config)
-        record["leave_one_out"] = _leave_one_out(three, two)
+        record["leave_one_out"] = leave_one_view_out(three, two)
     return record
 
 

@@ -300,7 +300,9 @@ class AlignmentProblem(torch.nn.Module):
             loss = loss + self.field_smoothness * (bend ** 2).sum()
         loss = loss + self.field_prior * (self.field ** 2).sum() + self.alpha_prior * (self.log_alphas() ** 2).sum()  # per view, shared or not
         guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
-        return loss + self.focal_prior * ((self.log_focal - guess) ** 2).sum()
+        # The pull is on the focal in use: a rig's (``cameras``) when it holds the cameras.
+        log_focal = self.log_focal if cameras is None else torch.log(cameras[2][:self.log_focal.numel()])
+        return loss + self.focal_prior * ((log_focal - guess) ** 2).sum()
 
 
 

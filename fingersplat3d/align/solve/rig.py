@@ -45,6 +45,7 @@ from .global_opt import (
     spanning_tree,
 )
 from .optimize import minimize
+from .rig_levenberg import levenberg_marquardt_rig
 
 __all__ = ["Rig", "RigCapture", "RigCalibration", "calibrate_rig", "rig_align", "robust_rotation_mean", "quarter_turn"]
 
@@ -204,7 +205,10 @@ def _solve(captures: Sequence[RigCapture], rig: Rig, turns, config: GlobalAlignC
     built = [_capture_problem(c, rig, t, config, p) for c, t, p in zip(captures, turns, previous)]
     problem = RigProblem([b[0] for b in built], rig, turns, np.zeros(len(captures)), fixed_rig)
     with single_threaded():
-        history = minimize(problem, 0, config.learning_rate, config.polish_iterations, config.polish_rounds)
+        if config.solver == "lm":
+            history = levenberg_marquardt_rig(problem, config.lm_iterations, fixed_rig=fixed_rig)
+        else:
+            history = minimize(problem, 0, config.learning_rate, config.polish_iterations, config.polish_rounds)
     alignments = []
     with torch.no_grad():
         for k, (capture_problem, data, grids, tree, aligned) in enumerate(built):
