@@ -34,6 +34,7 @@ __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reco
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
+MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
 
 
 @dataclass(frozen=True)
@@ -248,7 +249,35 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
             _warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
                   + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
                   "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)")
+    _check_turns_against_widths(capture, alignment, status, report)
     return status
+
+
+def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, status: dict, report: dict) -> None:
+    """Each aligned pair's least turn allowed by the silhouettes (:mod:`~fingersplat3d.align.width_check`); a warning
+    where the solved turn falls short of it."""
+    from .align.width_check import least_turns_deg
+    from .eval.poses import rotation_angle_deg
+
+    names, placed = capture.names, [v for v in range(len(capture)) if alignment.aligned[v]]
+    if len(placed) < 2:
+        return
+    bounds = least_turns_deg([view.mask for view in capture.views], alignment.depths, alignment.focals)
+    least, short = {}, []
+    for i, a in enumerate(placed):
+        for b in placed[i + 1:]:
+            if not np.isfinite(bounds[a, b]):
+                continue
+            pair = f"{names[a]}-{names[b]}"
+            least[pair] = round(float(bounds[a, b]), 1)
+            turn = float(rotation_angle_deg(alignment.cam_to_world[a][:3, :3], alignment.cam_to_world[b][:3, :3]))
+            if bounds[a, b] - turn > MAX_TURN_SHORTFALL_DEG:
+                short.append(f"{pair} ({turn:.0f}°, at least {bounds[a, b]:.0f}°)")
+    status["turn_at_least_deg"] = least
+    if short:
+        _warn(report, "the turn between " + ", ".join(short) + " is smaller than the views' silhouette widths allow "
+              "(turning about a finger cannot narrow it faster than cos(turn)): the finger's section is probably "
+              "flatter than the round prior, and the turn too small")
 
 
 def _refine_with_icp(capture: Capture, cameras: list[Camera], clouds: list, aligned: list[int], root: int,

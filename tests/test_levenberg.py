@@ -17,7 +17,7 @@ def capture():
     return synthesize(0, SynthConfig(size=(320, 256))).capture
 
 
-def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3):
+def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3, min_turns=None):
     from fingersplat3d.align.solve import global_opt
 
     rng = np.random.default_rng(seed)
@@ -33,18 +33,21 @@ def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3):
     rng = np.random.default_rng(seed + 1)
     initial = global_opt.InitialState(rotations, translations, log_scales, np.full(3, 0.1), np.log(focal) + 0.05,
                                       [rng.normal(0, 0.05, g.size) for g in grids])
-    problem, _ = alignment_problem(depths, focal, pairs, config, grids, initial, aligned, root)
+    problem, _ = alignment_problem(depths, focal, pairs, config, grids, initial, aligned, root, min_turns)
     with torch.no_grad():
         problem.omega.add_(torch.as_tensor(rng.normal(0, 0.01, problem.omega.shape)))
     return problem, pairs, depths, focal
 
 
 @pytest.mark.gradcheck
-@pytest.mark.parametrize("shared", [True, False])
-def test_the_built_jacobian_gives_the_loss_gradient(capture, shared):
-    """2 J^T r (the IRLS system) equals autograd's gradient of the true loss, every unknown included."""
+@pytest.mark.parametrize("shared, bounded", [(True, False), (False, False), (True, True)])
+def test_the_built_jacobian_gives_the_loss_gradient(capture, shared, bounded):
+    """2 J^T r (the IRLS system) equals autograd's gradient of the true loss, every unknown included (and the
+    hinge rows of least turns, two of three pairs held below their bound)."""
     config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared)
-    problem, *_ = _problem(capture, config, noise_px=2.0)  # residuals on both sides of the Cauchy scale
+    min_turns = np.array([[np.nan, 1.2, 0.1], [1.2, np.nan, 1.5], [0.1, 1.5, np.nan]]) if bounded else None
+    problem, *_ = _problem(capture, config, noise_px=2.0, min_turns=min_turns)  # residuals on both sides of the Cauchy scale
+    assert (problem.turn_bound_rows(problem.omega.detach()) > 0).sum() == (2 if bounded else 0)
     residual, jacobian = _system(problem)
     problem.zero_grad()
     problem().backward()
@@ -103,3 +106,19 @@ def test_fuse_reports_the_turn_uncertainty_of_every_pair(capture):
     report = fuse(blind, FuseConfig(splat=None)).report["alignment"]
     assert set(report["turn_uncertainty_deg"]) == {"left-center", "left-right", "center-right"}
     assert all(0 < value < 5 for value in report["turn_uncertainty_deg"].values())
+
+
+def test_the_solved_turns_keep_to_their_bounds(capture):
+    """A least turn above the one the matches want holds the pair at it (to a hair); a bound below it does not bind."""
+    from fingersplat3d.eval.poses import rotation_angle_deg
+
+    config = GlobalAlignConfig()
+    bounds = np.full((3, 3), np.nan)
+    bounds[0, 1] = bounds[1, 0] = np.radians(52.0)  # the true turn is 45
+    bounds[1, 2] = bounds[2, 1] = np.radians(30.0)
+    problem, *_ = _problem(capture, config, tilt=0.05, min_turns=bounds)
+    levenberg_marquardt(problem, iterations=30)
+    with torch.no_grad():
+        rotations = problem.rotations().numpy()
+    assert rotation_angle_deg(rotations[0], rotations[1]) > 51.5
+    assert rotation_angle_deg(rotations[1], rotations[2]) > 35.0  # measured 40-50: its neighbour pulls, not its bound

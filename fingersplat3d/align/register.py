@@ -40,6 +40,7 @@ from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .solve.rig import Rig, rig_align
+from .width_check import least_turns_deg
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
 
@@ -190,8 +191,13 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
     sizes = [(view.width, view.height) for view in views]
-    align = global_align if rig is None else (lambda d, f, c, cfg, previous=None: rig_align(d, f, c, cfg, rig, sizes, previous))
+    align = global_align if rig is None else (lambda d, f, c, cfg, previous=None, min_turns=None:
+                                              rig_align(d, f, c, cfg, rig, sizes, previous))
     alignment = align(depths, focals, registered, config.global_align)
+    # From here on no pair may turn less than its silhouettes allow (a round prior on a flat finger would).
+    min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals))
+    placed = np.asarray(alignment.aligned, bool)
+    min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan
     fitted = registered
     rounds = 0
     for _ in range(config.guided_rounds if registered else 0):
@@ -216,6 +222,6 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         if not refined:
             break
         say(f"global alignment, round {rounds}")
-        alignment = align(depths, focals, refined, config.global_align, previous=alignment)
+        alignment = align(depths, focals, refined, config.global_align, previous=alignment, min_turns=min_turns)
         fitted = refined
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips)

@@ -68,7 +68,8 @@ class AlignmentProblem(torch.nn.Module):
     def __init__(self, depths: Sequence[np.ndarray], grids: Sequence[FieldGrid], data: Correspondences,
                  initial: InitialState, free: Sequence[bool], *, shared_focal: bool, optimize_focal: bool,
                  focal_guess: np.ndarray, robust_px: float, alpha_prior: float, field_smoothness: float,
-                 field_prior: float, focal_prior: float, shared_relief: bool = False) -> None:
+                 field_prior: float, focal_prior: float, shared_relief: bool = False,
+                 min_turns: np.ndarray | None = None, turn_bound_weight: float = 0.0) -> None:
         super().__init__()
         dtype = torch.float64
         n_views = len(depths)
@@ -123,6 +124,12 @@ class AlignmentProblem(torch.nn.Module):
         self.log_focal = torch.nn.Parameter(torch.as_tensor([focal.mean()] if shared_focal else focal, dtype=dtype).clone(),
                                             requires_grad=optimize_focal)
         self.field = torch.nn.Parameter(torch.as_tensor(np.concatenate(initial.fields) if initial.fields else np.zeros(0), dtype=dtype).clone())
+        # Least turns between views (radians, from their silhouettes: align/width_check.py), kept as hinge rows.
+        bounds = np.full((n_views, n_views), np.nan) if min_turns is None else np.asarray(min_turns, np.float64)
+        pairs = [(a, b) for a in range(n_views) for b in range(a + 1, n_views) if np.isfinite(bounds[a, b]) and bounds[a, b] > 0]
+        buffer("bound_pairs", np.asarray(pairs, np.int64).reshape(-1, 2), torch.long)
+        buffer("bound_turns", np.asarray([bounds[a, b] for a, b in pairs], np.float64))
+        self.turn_bound_weight = float(turn_bound_weight) if pairs else 0.0
 
     # -- the current unknowns -------------------------------------------------------------------
     def rotations(self) -> torch.Tensor:
@@ -287,6 +294,11 @@ class AlignmentProblem(torch.nn.Module):
             guess = (self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess).numpy()
             focal = self.log_focal.detach().numpy()
             add(np.sqrt(self.focal_prior) * (focal - guess), [(at["log_focal"] + np.arange(focal.size), np.sqrt(self.focal_prior))])
+        if self.turn_bound_weight > 0:
+            omega = self.omega.detach().clone()
+            rows_value = self.turn_bound_rows(omega).detach().numpy()
+            derivative = torch.func.jacrev(self.turn_bound_rows)(omega).detach().numpy().reshape(len(rows_value), -1)
+            add(rows_value, [(np.full(len(rows_value), at["omega"] + c), derivative[:, c]) for c in range(derivative.shape[1])])
         total = sum(len(r) for r in residuals)
         jacobian = sparse.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(total, size))
         return np.concatenate(residuals), jacobian.tocsr()
@@ -302,7 +314,21 @@ class AlignmentProblem(torch.nn.Module):
         guess = self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess
         # The pull is on the focal in use: a rig's (``cameras``) when it holds the cameras.
         log_focal = self.log_focal if cameras is None else torch.log(cameras[2][:self.log_focal.numel()])
-        return loss + self.focal_prior * ((log_focal - guess) ** 2).sum()
+        loss = loss + self.focal_prior * ((log_focal - guess) ** 2).sum()
+        if self.turn_bound_weight > 0 and cameras is None:
+            loss = loss + (self.turn_bound_rows(self.omega) ** 2).sum()
+        return loss
+
+    def turn_bound_rows(self, omega: torch.Tensor) -> torch.Tensor:
+        """``sqrt(weight) * max(0, least turn - turn)`` (radians) per bounded view pair: zero while a turn keeps
+        to what the silhouettes allow."""
+        rotations = axis_angle_to_matrix(omega * self.free[:, None]) @ self.base_rotation
+        relative = rotations[self.bound_pairs[:, 0]].transpose(1, 2) @ rotations[self.bound_pairs[:, 1]]
+        skew = torch.stack([relative[:, 2, 1] - relative[:, 1, 2], relative[:, 0, 2] - relative[:, 2, 0],
+                            relative[:, 1, 0] - relative[:, 0, 1]], 1)
+        trace = relative[:, 0, 0] + relative[:, 1, 1] + relative[:, 2, 2]
+        turn = torch.atan2(skew.norm(dim=1), trace - 1.0)
+        return float(np.sqrt(self.turn_bound_weight)) * torch.relu(self.bound_turns - turn)
 
 
 

@@ -88,6 +88,9 @@ class GlobalAlignConfig:
     ``lbfgs``: Adam (``iterations``) then L-BFGS (``polish_*``), which converges slowly on this problem."""
     lm_iterations: int = 15
     """Levenberg-Marquardt steps per round at most (it stops when the loss no longer falls)."""
+    turn_bound_weight: float = 1e3
+    """Weight of the hinge rows that keep each view pair turned at least as far as their silhouette widths allow
+    (``min_turns`` of :func:`global_align`; :mod:`~fingersplat3d.align.width_check`)."""
     shared_relief: bool = True
     """One relief scale for all views (they see one finger) instead of one per view. Measured (README,
     5 seeds): rotation error median on synthetic ``cfpose`` 3.93 -> 3.35 deg, ``uwa`` 1.99 -> 2.01 deg;
@@ -196,11 +199,13 @@ def _correspondences(depths: Sequence[np.ndarray], pairs: Sequence[PairCorrespon
 
 def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[float],
                  pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig = GlobalAlignConfig(),
-                 root: int | None = None, previous: GlobalAlignment | None = None) -> GlobalAlignment:
+                 root: int | None = None, previous: GlobalAlignment | None = None,
+                 min_turns: np.ndarray | None = None) -> GlobalAlignment:
     """Align views given own-frame pointmap depths ``depths[v] [H, W]`` (NaN = none) and pair correspondences.
 
     ``focal_guess``: the focal (pixels) the pointmaps were made with (one, or one per view).
     ``previous``: refine from this alignment (same views and depths) instead of the spanning tree.
+    ``min_turns``: ``[N, N]`` radians, the least turn each view pair may have (NaN: none), kept by hinge rows.
     Views that no pair reaches keep an identity pose and are marked not aligned.
     """
     n_views = len(depths)
@@ -223,7 +228,7 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
         shared = np.full(n_views, np.exp(np.mean(np.log(guesses)))) if config.shared_focal else guesses
         initial = InitialState(rotations, translations, log_scales, np.zeros(n_views), np.log(shared),
                                [np.zeros(g.size) for g in grids])
-    problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root)
+    problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root, min_turns)
     with single_threaded():  # a few thousand residuals: threads only add hand-offs
         uncertainty = None
         if not len(data.weight):
@@ -240,7 +245,7 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
 
 def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: Sequence[PairCorrespondences],
                       config: GlobalAlignConfig, grids: Sequence[FieldGrid], initial: InitialState, aligned: Sequence[bool],
-                      root: int) -> tuple[AlignmentProblem, Correspondences]:
+                      root: int, min_turns: np.ndarray | None = None) -> tuple[AlignmentProblem, Correspondences]:
     """The problem of one capture: the aligned views' correspondences, the root view fixed."""
     data = _correspondences(depths, pairs, aligned)
     free = [aligned[v] and v != root for v in range(len(depths))]
@@ -248,7 +253,8 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
-                               focal_prior=config.focal_prior, shared_relief=config.shared_relief)
+                               focal_prior=config.focal_prior, shared_relief=config.shared_relief,
+                               min_turns=min_turns, turn_bound_weight=config.turn_bound_weight)
     return problem, data
 
 

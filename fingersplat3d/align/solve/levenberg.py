@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
-__all__ = ["levenberg_marquardt", "turn_uncertainty_deg"]
+__all__ = ["levenberg_marquardt", "damped_least_squares", "turn_uncertainty_deg"]
 
 
 def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
@@ -63,49 +63,67 @@ def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     return np.concatenate([residual, prior_residual]), sparse.vstack([jacobian, prior_jacobian]).tocsr()
 
 
-def levenberg_marquardt(problem, iterations: int = 15, tolerance: float = 1e-5) -> list[float]:
-    """Minimise ``problem()`` (an :class:`~fingersplat3d.align.solve.alignment_problem.AlignmentProblem`);
-    returns the loss after each accepted step."""
-    with torch.no_grad():
-        loss = float(problem())
-    history = [loss]
+def damped_least_squares(system, loss, snapshot, step_to, iterations: int = 15, tolerance: float = 1e-5) -> list[float]:
+    """Levenberg-Marquardt over a problem given as callables; returns the loss after each accepted step.
+
+    ``system()``: the (IRLS-weighted) residuals and their sparse Jacobian at the current point;
+    ``loss()``: the true loss there; ``snapshot()``: the current point; ``step_to(point, step)``: move
+    to ``point + step`` (``step`` None: back to ``point``). A step is kept only where the true loss
+    falls; the damping (a share of the Gauss-Newton diagonal) adapts to how steps fare.
+    """
+    current = loss()
+    history = [current]
     damping = 1e-4
     for _ in range(iterations):
-        residual, jacobian = _system(problem)
+        residual, jacobian = system()
         hessian = (jacobian.T @ jacobian).toarray()
         gradient = jacobian.T @ residual
         diagonal = np.diag(hessian).copy()
         active = diagonal > 0
         if not active.any():
             break
-        start = problem.unknowns().clone()
+        start = snapshot()
         improved = False
         for _ in range(8):
-            system = hessian[np.ix_(active, active)] + np.diag(damping * diagonal[active] + 1e-12)
+            matrix = hessian[np.ix_(active, active)] + np.diag(damping * diagonal[active] + 1e-12)
             try:
-                step = np.linalg.solve(system, -gradient[active])
+                solved = np.linalg.solve(matrix, -gradient[active])
             except np.linalg.LinAlgError:
                 damping *= 10
                 continue
-            update = np.zeros_like(diagonal)
-            update[active] = step
-            problem.set_unknowns(start + torch.as_tensor(update, dtype=start.dtype))
-            with torch.no_grad():
-                trial = float(problem())
-            if np.isfinite(trial) and trial < loss:
+            step = np.zeros_like(diagonal)
+            step[active] = solved
+            step_to(start, step)
+            trial = loss()
+            if np.isfinite(trial) and trial < current:
                 improved = True
                 damping = max(damping / 3.0, 1e-9)
                 break
             damping *= 4.0
         if not improved:
-            problem.set_unknowns(start)
+            step_to(start, None)
             break
-        decrease = (loss - trial) / max(abs(loss), 1e-300)
-        loss = trial
-        history.append(loss)
+        decrease = (current - trial) / max(abs(current), 1e-300)
+        current = trial
+        history.append(current)
         if decrease < tolerance:
             break
     return history
+
+
+def levenberg_marquardt(problem, iterations: int = 15, tolerance: float = 1e-5) -> list[float]:
+    """Minimise ``problem()`` (an :class:`~fingersplat3d.align.solve.alignment_problem.AlignmentProblem`);
+    returns the loss after each accepted step."""
+
+    def loss() -> float:
+        with torch.no_grad():
+            return float(problem())
+
+    def step_to(point: torch.Tensor, step: np.ndarray | None) -> None:
+        problem.set_unknowns(point if step is None else point + torch.as_tensor(step, dtype=point.dtype))
+
+    return damped_least_squares(lambda: _system(problem), loss, lambda: problem.unknowns().clone(), step_to,
+                                iterations, tolerance)
 
 
 def turn_uncertainty_deg(problem, aligned) -> np.ndarray:

@@ -21,7 +21,7 @@ import scipy.sparse as sparse
 import torch
 
 from ...rotations import axis_angle_to_matrix
-from .levenberg import _system
+from .levenberg import _system, damped_least_squares
 
 __all__ = ["levenberg_marquardt_rig", "rig_system"]
 
@@ -137,46 +137,22 @@ def levenberg_marquardt_rig(rig_problem, iterations: int = 15, tolerance: float 
         for parameter in (problem.omega, problem.translation, problem.log_focal):
             parameter.requires_grad_(True)
     _sync(rig_problem)
-    with torch.no_grad():
-        loss = float(rig_problem())
-    history, damping = [loss], 1e-4
-    _, starts, size = _layout(rig_problem)
-    for _ in range(iterations):
-        residual, jacobian = rig_system(rig_problem, fixed_rig)
-        hessian = (jacobian.T @ jacobian).toarray()
-        gradient = jacobian.T @ residual
-        diagonal = np.diag(hessian).copy()
-        active = diagonal > 0
-        if not active.any():
-            break
-        start = _state(rig_problem)
-        improved = False
-        for _ in range(8):
-            system = hessian[np.ix_(active, active)] + np.diag(damping * diagonal[active] + 1e-12)
-            try:
-                solved = np.linalg.solve(system, -gradient[active])
-            except np.linalg.LinAlgError:
-                damping *= 10
-                continue
-            step = np.zeros(size)
-            step[active] = solved
-            _apply(rig_problem, start, step, fixed_rig, starts)
-            with torch.no_grad():
-                trial = float(rig_problem())
-            if np.isfinite(trial) and trial < loss:
-                improved = True
-                damping = max(damping / 3.0, 1e-9)
-                break
-            damping *= 4.0
-        if not improved:
-            _restore(rig_problem, start)
-            break
-        decrease = (loss - trial) / max(abs(loss), 1e-300)
-        loss = trial
-        history.append(loss)
-        if decrease < tolerance:
-            break
-    for problem in rig_problem.problems:
-        for parameter in (problem.omega, problem.translation, problem.log_focal):
-            parameter.requires_grad_(False)
-    return history
+    _, starts, _ = _layout(rig_problem)
+
+    def loss() -> float:
+        with torch.no_grad():
+            return float(rig_problem())
+
+    def step_to(point, step: np.ndarray | None) -> None:
+        if step is None:
+            _restore(rig_problem, point)
+        else:
+            _apply(rig_problem, point, step, fixed_rig, starts)
+
+    try:
+        return damped_least_squares(lambda: rig_system(rig_problem, fixed_rig), loss, lambda: _state(rig_problem), step_to,
+                                    iterations, tolerance)
+    finally:
+        for problem in rig_problem.problems:
+            for parameter in (problem.omega, problem.translation, problem.log_focal):
+                parameter.requires_grad_(False)
