@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["axis_angle_to_matrix", "normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion"]
+__all__ = ["axis_angle_to_matrix", "normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion",
+           "rotation_angle"]
 
 _TINY = 1e-12
 
@@ -69,3 +70,17 @@ def axis_angle_to_matrix(omega: torch.Tensor) -> torch.Tensor:
                          torch.stack([-y, x, zero], -1)], -2)
     eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
     return eye + a * cross + b * (cross @ cross)
+
+
+def rotation_angle(R_a: torch.Tensor, R_b: torch.Tensor) -> torch.Tensor:
+    """Geodesic angle in radians, in [0, pi], between rotations ``R_a`` and ``R_b`` (``[..., 3, 3]``, broadcast).
+
+    The angle of ``R = R_a R_b^T`` is ``atan2(|skew(R)|, trace(R) - 1)`` where ``skew(R)`` is
+    ``(R32 - R23, R13 - R31, R21 - R12)`` (= ``2 sin(theta) axis``) and ``trace(R) - 1 = 2 cos(theta)``.
+    Unlike ``arccos((trace - 1) / 2)``, which loses half the digits near 0 and pi and needs
+    clipping, this is accurate to rounding over the whole range and accepts slightly
+    non-orthonormal input. Differentiable away from 0 (the norm's gradient is undefined there).
+    """
+    R = R_a @ R_b.transpose(-1, -2)
+    skew = torch.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    return torch.atan2(torch.linalg.vector_norm(skew, dim=-1), R.diagonal(dim1=-2, dim2=-1).sum(-1) - 1.0)

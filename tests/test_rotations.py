@@ -24,3 +24,13 @@ def test_axis_angle_and_quaternions_agree_with_scipy():
     wxyz = torch.as_tensor(Rotation.from_rotvec(vectors.numpy()).as_quat(scalar_first=True))
     wxyz = torch.where(wxyz[:, :1] < 0, -wxyz, wxyz)
     assert torch.allclose(quats, wxyz, atol=1e-12)
+
+
+def test_rotation_angle_is_the_axis_angle_magnitude_with_a_gradient():
+    from fingersplat3d.rotations import rotation_angle
+
+    omega = torch.tensor([[0.3, -0.2, 0.1], [1e-8, 0.0, 0.0], [0.0, 3.0, 0.0]], dtype=torch.float64, requires_grad=True)
+    angle = rotation_angle(axis_angle_to_matrix(omega), torch.eye(3, dtype=torch.float64))
+    assert torch.allclose(angle, omega.detach().norm(dim=1), rtol=1e-12, atol=1e-15)
+    angle[0].backward()  # away from 0 the angle is differentiable: d|omega|/d omega = omega / |omega|
+    assert torch.allclose(omega.grad[0], omega.detach()[0] / omega.detach()[0].norm())

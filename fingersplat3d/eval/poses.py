@@ -22,21 +22,19 @@ __all__ = ["rotation_angle_deg", "vector_angle_deg", "view_pairs", "relative_rot
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray | float:
     """Geodesic angle in degrees, in [0, 180], between rotations ``R_a`` and ``R_b`` (``[..., 3, 3]``).
 
-    The angle of ``R = R_a R_b^T`` is ``atan2(|skew(R)|, trace(R) - 1)`` where ``skew(R)`` is
-    the vector ``(R32 - R23, R13 - R31, R21 - R12)`` (= ``2 sin(theta) axis``) and
-    ``trace(R) - 1 = 2 cos(theta)``. Unlike ``arccos((trace - 1) / 2)``, which loses half the
-    digits near 0 and 180 degrees and needs clipping, this is accurate to rounding over the whole
-    range (1e-8 rad comes back as 1e-8 rad) and accepts slightly non-orthonormal input.
+    The formula is :func:`fingersplat3d.rotations.rotation_angle`'s (accurate to rounding over the whole
+    range: 1e-8 rad comes back as 1e-8 rad; slightly non-orthonormal input is accepted), in float64.
     A scalar for single matrices, an array for stacks (broadcasting over leading axes).
     """
+    import torch
+
+    from ..rotations import rotation_angle
+
     R_a = np.asarray(R_a, np.float64)
     R_b = np.asarray(R_b, np.float64)
     if R_a.shape[-2:] != (3, 3) or R_b.shape[-2:] != (3, 3):
         raise ValueError(f"rotations must be [..., 3, 3], got {R_a.shape} and {R_b.shape}")
-    R = R_a @ np.swapaxes(R_b, -1, -2)
-    skew = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
-    cosine_part = np.trace(R, axis1=-2, axis2=-1) - 1.0
-    angle = np.degrees(np.arctan2(np.linalg.norm(skew, axis=-1), cosine_part))
+    angle = np.degrees(rotation_angle(torch.from_numpy(R_a), torch.from_numpy(R_b)).numpy())
     return float(angle) if angle.ndim == 0 else angle
 
 

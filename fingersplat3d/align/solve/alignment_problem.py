@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
-from ...rotations import axis_angle_to_matrix
+from ...rotations import axis_angle_to_matrix, rotation_angle
 from .depth_field import FieldGrid
 
 __all__ = ["Correspondences", "InitialState", "AlignmentProblem"]
@@ -323,13 +323,8 @@ class AlignmentProblem(torch.nn.Module):
         """``sqrt(weight) * max(0, least turn - turn)`` (radians) per bounded view pair: zero while a turn keeps
         to what the silhouettes allow."""
         rotations = axis_angle_to_matrix(omega * self.free[:, None]) @ self.base_rotation
-        relative = rotations[self.bound_pairs[:, 0]].transpose(1, 2) @ rotations[self.bound_pairs[:, 1]]
-        skew = torch.stack([relative[:, 2, 1] - relative[:, 1, 2], relative[:, 0, 2] - relative[:, 2, 0],
-                            relative[:, 1, 0] - relative[:, 0, 1]], 1)
-        trace = relative[:, 0, 0] + relative[:, 1, 1] + relative[:, 2, 2]
-        turn = torch.atan2(skew.norm(dim=1), trace - 1.0)
+        turn = rotation_angle(rotations[self.bound_pairs[:, 0]], rotations[self.bound_pairs[:, 1]])
         return float(np.sqrt(self.turn_bound_weight)) * torch.relu(self.bound_turns - turn)
-
 
 
 def _surface_depth(scale, log_alpha, median, relief, z, field) -> torch.Tensor:

@@ -42,12 +42,12 @@ def _layout(rig_problem) -> tuple[int, list[int], int]:
     """Columns: rig omega ``3V``, rig centres ``3V``, rig log focal, capture scales ``K``, then each capture's own
     unknowns (log scales, log relief, fields); returns the start of the capture blocks, their starts and the size."""
     views, captures = rig_problem.base_rotation.shape[0], len(rig_problem.problems)
-    start = 6 * views + 1 + captures
+    first = start = 6 * views + 1 + captures
     starts = []
     for problem in rig_problem.problems:
         starts.append(start)
         start += problem.unknowns().numel() - 6 * problem.medians.shape[0] - problem.log_focal.numel()
-    return 6 * views + 1 + captures, starts, start
+    return first, starts, start
 
 
 def _chain(rig_problem, k: int, own_start: int, size: int, fixed_rig: bool) -> sparse.csr_matrix:
