@@ -2,6 +2,7 @@
 import importlib.util
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -33,3 +34,8 @@ def test_sample_matches_the_generator(name):
         np.testing.assert_array_equal(ours.mask, theirs.mask)
         np.testing.assert_allclose(ours.depth, theirs.depth, atol=1e-4, equal_nan=True)
         assert np.mean(np.abs(ours.image - theirs.image)) < 2e-3  # 8-bit quantisation only
+    # The true rolled print, written as it was made (8-bit), and its minutiae as minutiae.json describes them.
+    shipped_print = cv2.imread(str(ROOT / "data_samples" / name / "rolled_print.png"), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(shipped_print, fresh.rolled.image)
+    described = read_minutiae(ROOT / "data_samples" / name / "minutiae.json")["rolled_print"]
+    assert described["size"] == [shipped_print.shape[1], shipped_print.shape[0]] and described["ppi"] == 500.0

@@ -227,3 +227,52 @@ def test_ring_rig_extreme_sizes_stay_finite():
     tiny = synthesize(1, SynthConfig(rig="ring", angles=(-90.0, 0.0, 90.0), size=(16, 12)))
     for view in tiny.capture.views:
         assert np.all(np.isfinite(view.image)) and view.mask.any()
+
+
+def test_camera_distance_keeps_the_framing_and_changes_the_perspective():
+    close = synthesize(4, SynthConfig(size=(160, 128), distance_mm=50.0)).capture
+    far = synthesize(4, SynthConfig(size=(160, 128), distance_mm=400.0)).capture
+    for near_view, far_view in zip(close.views, far.views):
+        near_cam, far_cam = near_view.camera, far_view.camera
+        assert far_cam.K[0, 0] / near_cam.K[0, 0] == pytest.approx(8.0, rel=1e-9)  # same field at the finger
+        area = near_view.mask.sum(), far_view.mask.sum()
+        assert 0.75 < area[0] / area[1] < 1.33
+        relief = [np.nanmax(d[m]) - np.nanmin(d[m]) for d, m in ((near_view.depth, near_view.mask), (far_view.depth, far_view.mask))]
+        near_depth = [np.nanmedian(near_view.depth[near_view.mask]), np.nanmedian(far_view.depth[far_view.mask])]
+        # the same finger: the same relief in mm, at an eighth of the distance
+        assert relief[0] == pytest.approx(relief[1], rel=0.25) and near_depth[1] / near_depth[0] > 5
+    with pytest.raises(InputError, match="camera distance"):
+        synthesize(0, SynthConfig(size=(160, 128), distance_mm=5.0))
+
+
+def test_the_true_rolled_print_maps_like_a_frontal_photo_of_the_pad():
+    from fingersplat3d.synth.rolled import PRINT_PPI
+
+    result = synthesize(2, SynthConfig(rig="cfpose", size=(320, 400), poses=2))
+    rolled = result.rolled
+    assert rolled.ppi == PRINT_PPI and rolled.image.dtype == np.uint8 and rolled.image.shape == rolled.mask.shape
+    assert np.all(rolled.image[~rolled.mask] == 255) and rolled.image[rolled.mask].mean() < 200  # ridges dark inside
+    ids = [m["id"] for m in result.minutiae["minutiae_3d"]]
+    assert [m["id"] for m in rolled.minutiae] == ids == [m["id"] for m in result.minutiae["rolled_print"]["minutiae"]]
+    xy = np.array([m["xy"] for m in rolled.minutiae])
+    inside = rolled.mask[np.clip(np.rint(xy[:, 1]).astype(int), 0, rolled.mask.shape[0] - 1),
+                         np.clip(np.rint(xy[:, 0]).astype(int), 0, rolled.mask.shape[1] - 1)]
+    assert inside.mean() > 0.95
+    # Near the pad centre the frontal shot (p1) sees the skin nearly flat: print -> photo is a similarity
+    # without reflection, at the photo's pixels per mm, and the minutiae directions turn with it.
+    frontal = {m["id"]: m for m in result.minutiae["views"]["p1"] if m["visible"]}
+    centre = [m for m in result.minutiae["minutiae_3d"] if abs(m["skin_ab_mm"][1]) < 4.0 and m["id"] in frontal]
+    assert len(centre) >= 5
+    by_id = {m["id"]: m for m in rolled.minutiae}
+    source = np.array([by_id[m["id"]]["xy"] for m in centre])
+    target = np.array([frontal[m["id"]]["uv"] for m in centre])
+    matrix, _ = cv2.estimateAffinePartial2D(source, target, method=cv2.LMEDS)
+    scale = np.hypot(matrix[0, 0], matrix[1, 0])
+    fitted = source @ matrix[:, :2].T + matrix[:, 2]
+    camera = result.capture["p1"].camera
+    photo_px_per_mm = camera.K[0, 0] / np.median([np.linalg.norm(camera.center - np.array(m["xyz"])) for m in centre])
+    assert scale * rolled.px_per_mm == pytest.approx(photo_px_per_mm, rel=0.15)
+    assert np.median(np.linalg.norm(fitted - target, axis=1)) < 0.3 * photo_px_per_mm  # within 0.3 mm
+    turn = np.degrees(np.arctan2(matrix[1, 0], matrix[0, 0]))
+    difference = [(frontal[m["id"]]["angle_deg"] - by_id[m["id"]]["angle_deg"] - turn + 180) % 360 - 180 for m in centre]
+    assert np.median(np.abs(difference)) < 15

@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, (seed, config) in tqdm(SAMPLES.items(), desc="samples", unit="capture"):
         result = synthesize(seed, config)
         write_capture(result.capture, args.out / name, minutiae=result.minutiae, mesh=result.surface.to_open3d(),
-                      overwrite=True)
+                      rolled_print=result.rolled.image, overwrite=True)
     return 0
 
 

@@ -7,7 +7,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..atomic import check_free
-from .types import COUNT, POSITIVE, angles, size
+from ..synth.rigs import CAMERA_DISTANCE_MM
+from .types import COUNT, POSITIVE, angles, number, size
+
+DISTANCE = number(float, 30.0, 2000.0)
 
 __all__ = ["add", "run"]
 
@@ -18,7 +21,8 @@ def add(commands) -> None:
         "synth", help="generate synthetic 3D fingers photographed by a rig, with exact ground truth",
         description="Generate procedural 3D fingertips with fingerprint ridges and photograph them with a "
                     "capture rig. Writes one capture folder per finger: images/, masks/, depth/ (camera-frame "
-                    "z in mm), cameras.json, minutiae.json (3D and per-view pixels), mesh.ply, manifest.json. "
+                    "z in mm), cameras.json, minutiae.json (3D, per-view pixels and on the rolled print), mesh.ply, "
+                    "rolled_print.png (the true rolled print, 500 ppi), manifest.json. "
                     "Deterministic in --seed.")
     synth.add_argument("output", type=Path, help="capture folder to write (with --count > 1: a parent folder)")
     synth.add_argument("--rig", default="uwa", choices=("uwa", "cfpose", "ring"),
@@ -29,6 +33,9 @@ def add(commands) -> None:
     synth.add_argument("--count", type=COUNT, default=1, help="number of fingers (seeds seed..seed+count-1)")
     synth.add_argument("--size", type=size, help="image size WxH (default: the rig's)")
     synth.add_argument("--focal", type=POSITIVE, help="focal length in pixels (default: ~36 mm of finger across the long side)")
+    synth.add_argument("--distance-mm", type=DISTANCE, default=CAMERA_DISTANCE_MM,
+                       help=f"camera to finger in mm, the framing kept (default {CAMERA_DISTANCE_MM:g}; 50: a wide-angle "
+                            "close-up like a phone's, 400: nearly orthographic)")
     synth.add_argument("--angles", type=angles, help="ring rig: camera angles in degrees around the finger axis, written with = when the first is negative: --angles=-60,-20,20,60")
     synth.add_argument("--poses", type=COUNT, default=10, help="cfpose rig: number of shots (default 10)")
     synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
@@ -54,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     if args.specular is not None:
         appearance = replace(appearance, specular=args.specular)
     config = SynthConfig(rig=args.rig, size=args.size, focal=args.focal, angles=args.angles, poses=args.poses,
-                         pattern=args.pattern, appearance=appearance, gray=args.gray)
+                         pattern=args.pattern, appearance=appearance, gray=args.gray, distance_mm=args.distance_mm)
     seeds = range(args.seed, args.seed + args.count)
     targets = [args.output] if args.count == 1 else [args.output / f"{args.rig}_{seed:05d}" for seed in seeds]
     for target in targets:
@@ -64,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         result = synthesize(seed, config)
         write_capture(result.capture, target, minutiae=result.minutiae, mesh=result.surface.to_open3d(),
-                      overwrite=args.overwrite, image_bits=args.bits,
+                      rolled_print=result.rolled.image, overwrite=args.overwrite, image_bits=args.bits,
                       extra_manifest={"timing_s": {**result.seconds, "total": time.perf_counter() - start}})
         if args.count == 1:
             visible = {name: sum(m["visible"] for m in entries) for name, entries in result.minutiae["views"].items()}

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .process import in_fresh_process, peak_rss_mb
+from ..synth.rigs import CAMERA_DISTANCE_MM
 
 __all__ = ["GeometryCase", "CASES", "RING_ANGLES", "RING_VIEWS", "pick_views", "score_geometry", "synth_captures", "run_geometry",
            "geometry_table"]
@@ -37,14 +38,17 @@ class GeometryCase:
     rig: str  # "ring" | "uwa" | "cfpose"
     views: int
     size: tuple[int, int] = (640, 512)
+    distance_mm: float = CAMERA_DISTANCE_MM
+    """Camera to finger (the framing kept): short for a wide-angle close-up, long for a nearly orthographic camera."""
 
     @property
     def label(self) -> str:
-        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}"
+        far = "" if self.distance_mm == CAMERA_DISTANCE_MM else f" at {self.distance_mm:g} mm"
+        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}"
 
     @property
     def synth_key(self) -> tuple:
-        return (self.rig, self.size)
+        return (self.rig, self.size, self.distance_mm)
 
 
 CASES = {
@@ -53,6 +57,7 @@ CASES = {
     "cfpose2": GeometryCase("cfpose", 2, (512, 640)), "cfpose3": GeometryCase("cfpose", 3, (512, 640)),
     "cfpose5": GeometryCase("cfpose", 5, (512, 640)),
     "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
+    "uwa3-close": GeometryCase("uwa", 3, distance_mm=50.0), "uwa3-far": GeometryCase("uwa", 3, distance_mm=400.0),
 }
 
 
@@ -86,7 +91,8 @@ def score_geometry(result, truth: dict) -> dict:
                                             default=float("nan"))}
 
 
-def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str) -> list[Path]:
+def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str,
+                   distance_mm: float = CAMERA_DISTANCE_MM) -> list[Path]:
     """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`), pickled into
     ``folder`` for measurements that run in other processes."""
     import pickle
@@ -96,8 +102,9 @@ def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: s
     options = {"angles": RING_ANGLES} if rig == "ring" else {}
     paths = []
     for seed in seeds:
-        path = folder / f"{rig}-{size[0]}x{size[1]}-{seed}.pkl"
-        path.write_bytes(pickle.dumps(synthesize(seed, SynthConfig(rig=rig, size=size, **options)).capture))
+        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{seed}.pkl"
+        config = SynthConfig(rig=rig, size=size, distance_mm=distance_mm, **options)
+        path.write_bytes(pickle.dumps(synthesize(seed, config).capture))
         paths.append(path)
     return paths
 
@@ -141,8 +148,8 @@ def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progr
     config = config or FuseConfig(splat=None)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        paths = {(rig, size): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig)]
-                 for rig, size in dict.fromkeys(case.synth_key for case in cases)}
+        paths = {(rig, size, far): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far)]
+                 for rig, size, far in dict.fromkeys(case.synth_key for case in cases)}
         for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
             rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
     return rows

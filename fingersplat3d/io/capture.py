@@ -8,6 +8,7 @@ Layout (docs/conventions.md)::
     cameras.json         when every view has a camera (schema in :mod:`.cameras`)
     minutiae.json        optional ground truth (schema in :mod:`.minutiae`)
     mesh.ply             optional ground-truth surface (binary PLY)
+    rolled_print.png     optional ground-truth rolled print (8-bit gray, 500 ppi; minutiae.json says how it maps)
     manifest.json        {"format": "fingersplat3d-capture", "version": 1,
                           "created_by": "fingersplat3d <version>", "views": [names in order],
                           "files": {"images": {view: path}, "masks": {...}, "depth": {...},
@@ -38,6 +39,7 @@ import numpy as np
 from ..atomic import atomic_dir
 from ..errors import InputError, InputNote, input_error
 from ..scene import Capture, View
+from ..synth.rolled import ROLLED_PRINT_FILE
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
 from .images import IMAGE_SUFFIXES, read_image, read_mask, write_image, write_mask
@@ -51,6 +53,7 @@ __all__ = ["CAPTURE_FORMAT", "CAPTURE_VERSION", "CaptureFiles", "capture_files",
 CAPTURE_FORMAT = "fingersplat3d-capture"
 CAPTURE_VERSION = 1
 MANIFEST, CAMERAS, MINUTIAE, MESH = "manifest.json", "cameras.json", "minutiae.json", "mesh.ply"
+ROLLED_PRINT = ROLLED_PRINT_FILE
 _RESERVED_KEYS = ("format", "version", "created_by", "views", "files", "metadata")
 _BAD_NAME = re.compile(r'[/\\:*?"<>|\x00-\x1f]')
 
@@ -175,12 +178,13 @@ def _write_mesh(path: Path, mesh: Any) -> None:
 
 
 def write_capture(capture: Capture, folder: str | Path, *, minutiae: dict | None = None, mesh: Any = None,
-                  overwrite: bool = False, image_bits: int = 8, extra_manifest: Mapping[str, Any] | None = None
-                  ) -> Path:
+                  overwrite: bool = False, image_bits: int = 8, extra_manifest: Mapping[str, Any] | None = None,
+                  rolled_print: np.ndarray | None = None) -> Path:
     """Write ``capture`` as a capture folder (layout above), atomically; return the folder.
 
     ``minutiae`` is a dict for ``minutiae.json``; ``mesh`` an ``open3d.geometry.TriangleMesh`` (or
-    the path of a PLY to copy); ``image_bits`` is 8 or 16 for every image; ``extra_manifest`` adds
+    the path of a PLY to copy); ``rolled_print`` an 8-bit gray image (``rolled_print.png``);
+    ``image_bits`` is 8 or 16 for every image; ``extra_manifest`` adds
     top-level manifest keys (the reserved ones cannot be replaced). ``cameras.json`` is written
     when every view has a camera, with ``units`` / ``scale_mm_per_unit`` from ``capture.metadata``
     (default ``"mm"`` / null). An existing non-empty folder is an error unless ``overwrite``.
@@ -218,6 +222,9 @@ def write_capture(capture: Capture, folder: str | Path, *, minutiae: dict | None
         if mesh is not None:
             _write_mesh(temporary / MESH, mesh)
             files["mesh"] = MESH
+        if rolled_print is not None:
+            write_image(temporary / ROLLED_PRINT, np.asarray(rolled_print, np.float32) / 255.0, bits=8)
+            files["rolled_print"] = ROLLED_PRINT
         manifest = {"format": CAPTURE_FORMAT, "version": CAPTURE_VERSION, "created_by": f"fingersplat3d {__version__}",
                     "views": capture.names, "files": files, "metadata": metadata, **extra}
         (temporary / MANIFEST).write_text(json.dumps(manifest, indent=2, allow_nan=False) + "\n", encoding="utf-8")

@@ -10,7 +10,8 @@ from ..errors import InputError
 from ..scene import Capture, View
 from .render import Appearance, FingerScene, Rendering, skin_weight
 from .ridges import BIFURCATION, PATTERN_CLASSES, RidgePattern, make_ridge_pattern
-from .rigs import DEFAULT_SIZES, RIGS, RigView, cfpose_rig, ring_rig, uwa_rig
+from .rolled import ROLLED_PRINT_FILE, RolledPrint, true_rolled_print
+from .rigs import CAMERA_DISTANCE_MM, DEFAULT_SIZES, RIGS, RigView, cfpose_rig, ring_rig, uwa_rig
 from .shape import FingerSurface, make_finger_surface, random_finger_params
 
 __all__ = ["SynthConfig", "SynthResult", "synthesize", "minutiae_ground_truth"]
@@ -30,6 +31,9 @@ class SynthConfig:
     """Image (width, height); uwa/ring 1280x1024, cfpose 1024x1280."""
     focal: float | None = None
     """Focal length in pixels at ``size``; default frames ~36 mm of finger across the long side."""
+    distance_mm: float = CAMERA_DISTANCE_MM
+    """Camera to finger axis (mm); the default focal keeps the framing, so a short distance is a wide-angle
+    close-up (strong perspective, like a phone) and a long one nearly orthographic."""
     angles: tuple[float, ...] | None = None
     """Ring angles in degrees around the finger axis (ring rig; 0 faces the pad)."""
     poses: int = 10
@@ -57,6 +61,8 @@ class SynthResult:
     pattern: RidgePattern
     renderings: dict[str, Rendering]
     seconds: dict[str, float]
+    rolled: RolledPrint
+    """The finger's true rolled print (:mod:`~fingersplat3d.synth.rolled`); ``minutiae['rolled_print']`` describes it."""
 
 
 def _validate(config: SynthConfig) -> None:
@@ -68,6 +74,8 @@ def _validate(config: SynthConfig) -> None:
         raise InputError(f"image size must be two numbers between 8 and 16384, got {config.size}")
     if config.focal is not None and not (np.isfinite(config.focal) and config.focal > 0):
         raise InputError(f"focal length must be a positive number of pixels, got {config.focal}")
+    if not (np.isfinite(config.distance_mm) and 30.0 <= config.distance_mm <= 2000.0):
+        raise InputError(f"camera distance must lie within 30..2000 mm, got {config.distance_mm}")
     if config.rig == "ring" and not config.angles:
         raise InputError("the ring rig needs camera angles, e.g. --angles=-30,0,30")
     if config.rig == "cfpose" and not 1 <= config.poses <= 100:
@@ -102,11 +110,13 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     clock = time.perf_counter()
     size = tuple(config.size) if config.size else DEFAULT_SIZES[config.rig]
     if config.rig == "uwa":
-        rig = uwa_rig(params, size, config.focal, np.random.default_rng(rng.integers(2**63)) if config.finger_pose else None)
+        rig = uwa_rig(params, size, config.focal, np.random.default_rng(rng.integers(2**63)) if config.finger_pose else None,
+                      distance=config.distance_mm)
     elif config.rig == "ring":
-        rig = ring_rig(params, config.angles, size, config.focal)
+        rig = ring_rig(params, config.angles, size, config.focal, distance=config.distance_mm)
     else:
-        rig = cfpose_rig(params, np.random.default_rng(rng.integers(2**63)), size, config.focal, config.poses)
+        rig = cfpose_rig(params, np.random.default_rng(rng.integers(2**63)), size, config.focal, config.poses,
+                         distance=config.distance_mm)
     gray = config.gray if config.gray is not None else config.rig != "cfpose"
     # Optics and glints are set for the rig's default image size: a smaller image is blurred less (in pixels).
     zoom = size[0] / DEFAULT_SIZES[config.rig][0]
@@ -118,6 +128,8 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
 
     clock = time.perf_counter()
     minutiae = minutiae_ground_truth(surface, pattern, rig, renderings)
+    rolled = true_rolled_print(surface, pattern, minutiae["minutiae_3d"])
+    minutiae["rolled_print"] = rolled.as_json(ROLLED_PRINT_FILE)
     seconds["minutiae"] = time.perf_counter() - clock
     views = tuple(View(view.name, renderings[view.name].image, renderings[view.name].mask, view.camera,
                        renderings[view.name].depth) for view in rig)
@@ -128,7 +140,7 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
         "poses": {view.name: view.pose for view in rig},
         "lights_world": {view.name: [float(x) for x in view.light_world] for view in rig},
     }
-    return SynthResult(Capture(views, metadata), minutiae, surface, pattern, renderings, seconds)
+    return SynthResult(Capture(views, metadata), minutiae, surface, pattern, renderings, seconds, rolled)
 
 
 def minutiae_ground_truth(surface: FingerSurface, pattern: RidgePattern, rig: list[RigView],

@@ -49,8 +49,9 @@ def rotation_about(axis: np.ndarray, degrees: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
 
 
-def _default_focal(size: tuple[int, int]) -> float:
-    return max(size) / FIELD_OF_VIEW_MM * CAMERA_DISTANCE_MM
+def _default_focal(size: tuple[int, int], distance: float = CAMERA_DISTANCE_MM) -> float:
+    """The focal that frames :data:`FIELD_OF_VIEW_MM` across the long side from ``distance`` mm."""
+    return max(size) / FIELD_OF_VIEW_MM * distance
 
 
 def _target(params: FingerParams) -> np.ndarray:
@@ -78,21 +79,21 @@ def random_finger_pose(params: FingerParams, rng: np.random.Generator, max_roll:
 
 def ring_rig(params: FingerParams, angles_deg, size: tuple[int, int] = (1280, 1024),
              focal: float | None = None, names=None, finger_to_rig: np.ndarray | None = None,
-             tip_left: bool = False, pose: dict | None = None) -> list[RigView]:
+             tip_left: bool = False, pose: dict | None = None, distance: float = CAMERA_DISTANCE_MM) -> list[RigView]:
     """Cameras on a ring around the rig axis (+x); 0 degrees faces the pad, positive toward +y.
 
     ``finger_to_rig`` places the finger in the rig (default: its axis on the rig axis); the light
     is fixed in the rig. ``tip_left`` turns every camera by 180 degrees about its optical axis, so
-    the tip points left in the images (UWA's raw frames).
+    the tip points left in the images (UWA's raw frames). ``distance``: camera to the rig axis (mm).
     """
-    focal = _default_focal(size) if focal is None else float(focal)
+    focal = _default_focal(size, distance) if focal is None else float(focal)
     target = _target(params)
     placement = np.eye(4) if finger_to_rig is None else np.asarray(finger_to_rig, np.float64)
     light = placement[:3, :3].T @ np.array([0.25, -0.2, -1.0])  # in front of the pad, a little toward the tip
     views = []
     for index, angle in enumerate(angles_deg):
         rotation = rotation_about([1.0, 0.0, 0.0], float(angle))
-        eye = target + rotation @ np.array([0.0, 0.0, -CAMERA_DISTANCE_MM])
+        eye = target + rotation @ np.array([0.0, 0.0, -distance])
         up = rotation @ np.array([0.0, 1.0 if tip_left else -1.0, 0.0])  # image right = -x (tip left) or +x
         camera = Camera.from_focal(focal, size[0], size[1], look_at(eye, target, up) @ placement)
         name = names[index] if names else f"v{index}"
@@ -101,26 +102,26 @@ def ring_rig(params: FingerParams, angles_deg, size: tuple[int, int] = (1280, 10
 
 
 def uwa_rig(params: FingerParams, size: tuple[int, int] = (1280, 1024), focal: float | None = None,
-            rng: np.random.Generator | None = None) -> list[RigView]:
+            rng: np.random.Generator | None = None, distance: float = CAMERA_DISTANCE_MM) -> list[RigView]:
     """UWA 3D/2D-like: three simultaneous cameras at -45, 0, +45 degrees, tip left; a hand-placed finger with ``rng``."""
     placement, pose = random_finger_pose(params, rng) if rng is not None else (None, None)
     # Tip left: image right is -x, so the camera turned +45 degrees about +x is the one on the left.
     return ring_rig(params, (45.0, 0.0, -45.0), size, focal, names=("left", "center", "right"),
-                    finger_to_rig=placement, tip_left=True, pose=pose)
+                    finger_to_rig=placement, tip_left=True, pose=pose, distance=distance)
 
 
 def cfpose_rig(params: FingerParams, rng: np.random.Generator, size: tuple[int, int] = (1024, 1280),
                focal: float | None = None, count: int = 10, max_roll: float = 45.0,
-               max_pitch: float = 15.0, max_yaw: float = 8.0) -> list[RigView]:
+               max_pitch: float = 15.0, max_yaw: float = 8.0, distance: float = CAMERA_DISTANCE_MM) -> list[RigView]:
     """CFPose-like: one fixed camera, the finger (tip up) rolled, pitched and turned at random.
 
     The first pose is frontal; the others spread roll over ``[-max_roll, max_roll]`` (stratified,
     so a finger gets both sides) with random pitch and in-plane yaw.
     """
-    focal = _default_focal(size) if focal is None else float(focal)
+    focal = _default_focal(size, distance) if focal is None else float(focal)
     pivot = _target(params)
     # Stage frame = finger frame at rest; the camera looks at the pad with the tip up in the image.
-    stage_to_cam = look_at(pivot + [0.0, 0.0, -CAMERA_DISTANCE_MM], pivot, [1.0, 0.0, 0.0])
+    stage_to_cam = look_at(pivot + [0.0, 0.0, -distance], pivot, [1.0, 0.0, 0.0])
     light_stage = np.array([0.3, 0.35, -1.0])
     rolls = np.concatenate([[0.0], np.linspace(-max_roll, max_roll, count - 1) if count > 1 else []])
     if count > 2:
