@@ -172,7 +172,8 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
         registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig)
         report["pairs"] = registration.pairs + identical
         report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds,
-                                  "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)}}
+                                  "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)},
+                                  "photometric": registration.photometric}
         return registration.alignment
     if rig is not None:
         raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "

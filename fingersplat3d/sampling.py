@@ -1,13 +1,13 @@
 """Sampling an image or a map at sub-pixel positions (pixel centres at integer coordinates).
 
-Pure numpy/scipy: no Open3D, no files.
+Pure numpy/scipy (torch, imported where used, for the differentiable sampler): no Open3D, no files.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-__all__ = ["sample_bilinear", "sample_nearest"]
+__all__ = ["sample_bilinear", "sample_nearest", "sample_bilinear_torch"]
 
 
 def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -33,3 +33,14 @@ def sample_nearest(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
     values = np.full(len(uv), np.nan)
     values[inside] = image[row[inside].astype(int), col[inside].astype(int)]
     return values
+
+
+def sample_bilinear_torch(image, uv):
+    """Torch ``image [H, W]`` at ``uv [N, 2]`` (u right, v down): bilinear and differentiable in both, 0 outside
+    the image (what :func:`sample_bilinear` gives inside it)."""
+    import torch
+
+    h, w = image.shape[-2:]
+    grid = torch.stack([2 * uv[:, 0] / max(w - 1, 1) - 1, 2 * uv[:, 1] / max(h - 1, 1) - 1], -1)
+    return torch.nn.functional.grid_sample(image.reshape(1, 1, h, w), grid[None, None].to(image.dtype), mode="bilinear",
+                                           padding_mode="zeros", align_corners=True)[0, 0, 0]

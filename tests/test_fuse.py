@@ -36,6 +36,7 @@ def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):
     assert support["center"] > 0.9 and all(0.3 < share <= 1.0 for share in support.values())
     tips = report["registration"]["tip"]  # synthetic fingers point left, cut by the right border
     assert all(tip["side"] == "left" and "border cuts the other" in tip["why"] for tip in tips.values())
+    assert report["registration"]["photometric"] == {}  # the dense photometric refinement is opt-in (--photometric)
     errors = relative_rotation_errors([c.world_to_cam for c in reconstruction.cameras],
                                       [v.camera.world_to_cam for v in uwa.views])
     # The 45-degree pairs: measured 3-7 degrees (see the README's table); a broken alignment is tens.

@@ -39,6 +39,7 @@ from .correspond.guided import GuidedMatches, match_guided
 from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
 from .width_check import least_turns_deg
 
@@ -67,6 +68,10 @@ class RegistrationConfig:
     """Fundamental-matrix inlier threshold, in ridge periods (at least 1 pixel)."""
     global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
     """The joint optimisation."""
+    photometric: PhotometricConfig = field(default_factory=lambda: PhotometricConfig(iterations=0))
+    """The dense photometric refinement after the guided rounds (without a rig). Off by default (``iterations=0``;
+    ``PhotometricConfig()`` turns it on): measured, it brings the views' ridges into phase but does not make the
+    synthetic depth better nor move the turns (docs/fuse.md)."""
     seed: int = 0
     """Seed of the random parts (RANSAC of the pair similarities)."""
 
@@ -85,6 +90,8 @@ class Registration:
     """The verified correspondences the final alignment was fitted to (what a rig calibration pools)."""
     tips: list[dict] = field(default_factory=list)
     """Per view, the end taken for the fingertip: ``side`` (of the image) and ``why`` (in words)."""
+    photometric: dict = field(default_factory=dict)
+    """The dense photometric refinement's record (texture agreement before and after, samples, seconds); empty when off."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -224,4 +231,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         say(f"global alignment, round {rounds}")
         alignment = align(depths, focals, refined, config.global_align, previous=alignment, min_turns=min_turns)
         fitted = refined
-    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips)
+    photometric = {}
+    if rig is None and config.photometric.iterations > 0 and fitted and sum(alignment.aligned) >= config.photometric.min_views:
+        say("photometric refinement")
+        alignment, photometric = refine_alignment(alignment, depths, focals, fitted, config.global_align, prepared.textures,
+                                                  prepared.masks, prepared.period, config.photometric, min_turns)
+    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric)

@@ -10,7 +10,7 @@ from ..align.register import RegistrationConfig
 from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
-from .options import add_registration_arguments, add_splat_arguments, read_rig, splat_config
+from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, splat_config
 from .types import COUNT, POSITIVE, STEPS
 
 __all__ = ["add", "run"]
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
-                                      global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations,
+                                      photometric=photometric_config(args), global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations,
                                                                      solver=args.alignment_solver))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,

@@ -5,10 +5,11 @@ import argparse
 from pathlib import Path
 
 from ..align.register import MATCHERS, RegistrationConfig
+from ..align.solve.photometric import PhotometricConfig
 from ..splat.config import DEFAULT_PRESET, PRESETS, preset
 from .types import COUNT, POSITIVE, STEPS
 
-__all__ = ["add_registration_arguments", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "read_rig"]
+__all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "read_rig"]
 
 
 def add_registration_arguments(parser) -> None:
@@ -17,7 +18,16 @@ def add_registration_arguments(parser) -> None:
                              "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
     parser.add_argument("--guided-rounds", type=STEPS, default=RegistrationConfig.guided_rounds,
                         help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds})")
+    parser.add_argument("--photometric", action="store_true",
+                        help="after the guided rounds, refine each view's surface densely on the ridge texture every other "
+                             "view sees (~2 s; brings the views' ridges into phase, for texturing and prints; it does not "
+                             "move the turns, and on synthetic fingers it does not make the depth better: docs/fuse.md)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+
+
+def photometric_config(args: argparse.Namespace) -> PhotometricConfig:
+    """The dense photometric refinement ``--photometric`` asks for (off: no iterations)."""
+    return PhotometricConfig() if getattr(args, "photometric", False) else PhotometricConfig(iterations=0)
 
 
 def add_splat_arguments(parser) -> None:
@@ -55,7 +65,8 @@ def fuse_config(args: argparse.Namespace):
     """The fuse settings shared by ``fuse``-like commands (``batch``, ``rig calibrate``)."""
     from ..pipeline import FuseConfig
 
-    registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed)
+    registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
+                                      photometric=photometric_config(args))
     return FuseConfig(registration=registration, splat=splat_config(args) if hasattr(args, "no_splat") else None,
                       mesh=getattr(args, "mesh", False))
 

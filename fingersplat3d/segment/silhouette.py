@@ -86,8 +86,9 @@ def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothin
     np.maximum.at(border_high, index[on_border], t[on_border])
     cut_low = present & (border_low <= low + 1.0)
     cut_high = present & (border_high >= high - 1.0)
-    half_width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)  # +0.5: pixels have extent
-    centre = np.where(present, 0.5 * (high + low), np.nan)
+    with np.errstate(invalid="ignore"):  # stations with no chord hold inf bounds: NaN there, as meant
+        half_width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)  # +0.5: pixels have extent
+        centre = np.where(present, 0.5 * (high + low), np.nan)
     whole = present & ~cut_low & ~cut_high
     cut = present & ~whole
     stations = np.arange(count)
