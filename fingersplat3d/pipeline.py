@@ -408,9 +408,15 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         if config.splat is not None:
             from .splat.stage import run_splat_stage
 
+            device = resolve_device(config.device)
             with step("splat"):
+                if device.type == "cpu":  # the numba kernels' first compile, named on the bar when it is not cached
+                    from .splat.warmup import ensure_compiled
+
+                    ensure_compiled(lambda text: bar.set_postfix_str(f"splat: {text}"))
+                    bar.set_postfix_str("splat")
                 splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean,
-                                        depths=depths, device=resolve_device(config.device), progress=progress)
+                                        depths=depths, device=device, progress=progress)
             cameras = splat.cameras
             report["splat"] = splat.report
             bar.update()

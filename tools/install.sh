@@ -19,3 +19,5 @@ fi
 
 python3 -m pip install -q torch==2.13.0
 python3 -m pip install -q -e ".[test]"
+# The CPU rasterizer's numba kernels, compiled once now rather than during the first fuse (cached on disk).
+python3 -m fingersplat3d.splat.warmup
