@@ -127,3 +127,16 @@ def test_command_with_user_mates_and_bad_input(fused, tmp_path, capsys):
     assert "not a reconstruction folder" in capsys.readouterr().err
     assert main(["eval", "register", str(fused), "--matcher", "--truth", str(mates), "-o", str(tmp_path / "d")]) == EXIT_INPUT
     assert not any((tmp_path / n).exists() for n in "abcd")
+
+
+def test_the_summary_says_when_the_warp_check_is_in_sample():
+    from fingersplat3d.experiments.register import summary_markdown
+
+    def row(name, fitted):
+        return {"reconstruction": name, "view_a": "f0", "view_b": "f1", "status": "failed", "reason": "no mates",
+                "warp_shift_px": 0.3, "warp_ncc": 0.5, "warp_fitted": fitted}
+
+    plain = summary_markdown([row("a", False), row("b", False)])
+    assert "Median ridge NCC over 2 pairs: 0.50" in plain and "in-sample" not in plain
+    marked = summary_markdown([row("a", False), row("b", True)])
+    assert "b: made with `fs3d fuse --photometric`" in marked and "in-sample" in marked

@@ -40,7 +40,7 @@ PAPER_FIGURES = {"rigid 2D": 52.27, "TPS": 26.18, "VGGT": 10.45, "FingerSplat": 
 """The paper's mean distance (px) between mapped and mated minutiae on UWA ("UWA*" mates)."""
 METHODS = ("3D", "rigid 2D", "TPS")
 COLUMNS = ("reconstruction", "view_a", "view_b", "mates_source", "mates", "scored", "method", "mean_px",
-           "median_px", "p90_px", "warp_shift_px", "warp_ncc", "status", "reason")
+           "median_px", "p90_px", "warp_shift_px", "warp_ncc", "warp_fitted", "status", "reason")
 COLOURS = {"3D": (40, 40, 230), "rigid 2D": (230, 160, 40), "TPS": (200, 60, 200)}  # BGR
 
 
@@ -133,6 +133,17 @@ class _Reconstruction:
         self.cameras = read_cameras(folder / "cameras.json")
         self._photos = photos or {}
 
+    @property
+    def fitted_to_ridges(self) -> bool:
+        """Whether ``fs3d fuse --photometric`` fitted its surfaces to the very ridge agreement the warp check measures."""
+        import json
+
+        try:
+            report = json.loads((self.folder / "report.json").read_text())
+        except (OSError, ValueError):
+            return False
+        return bool(report.get("registration", {}).get("photometric")) if isinstance(report, dict) else False
+
     def depth(self, name: str) -> np.ndarray:
         from ..io.depth import read_depth
 
@@ -198,7 +209,7 @@ def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: "_Reconstruction",
     texture_a, texture_b = ridge_texture(warped, both, period), ridge_texture(gray_b, both, period)
     (dx, dy), _ = cv2.phaseCorrelate(texture_a.astype(np.float64), texture_b.astype(np.float64))
     ncc = float(np.corrcoef(texture_a[both], texture_b[both])[0, 1])
-    return {"warp_shift_px": float(np.hypot(dx, dy)), "warp_ncc": ncc}
+    return {"warp_shift_px": float(np.hypot(dx, dy)), "warp_ncc": ncc, "warp_fitted": rec.fitted_to_ridges}
 
 
 def _picture(path: Path, photo_b: np.ndarray, mates: Mates, predictions: dict[str, np.ndarray]) -> None:
@@ -348,6 +359,10 @@ def summary_markdown(rows: list[dict]) -> str:
             f"{key[0]} {key[1]} -> {key[2]}: {r['warp_shift_px']:.1f}, {r['warp_ncc']:.2f}" for key, r in sorted(checked.items())),
             "", f"Median ridge NCC over {len(checked)} pairs: "
             f"{np.median([r['warp_ncc'] for r in checked.values()]):.2f}."]
+        fitted = sorted({key[0] for key, r in checked.items() if r.get("warp_fitted")})
+        if fitted:
+            lines += ["", f"{', '.join(fitted)}: made with `fs3d fuse --photometric`, whose surfaces are fitted to this "
+                          "very ridge agreement; there the warp check is in-sample, not an independent check."]
     failed = [r for r in rows if r["status"] != "done"]
     if failed:
         lines += ["", "Not scored:", ""] + [f"- {r['reconstruction']} {r['view_a']} -> {r['view_b']}"
