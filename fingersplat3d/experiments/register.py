@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import cv2
@@ -133,7 +134,7 @@ class _Reconstruction:
         self.cameras = read_cameras(folder / "cameras.json")
         self._photos = photos or {}
 
-    @property
+    @cached_property
     def fitted_to_ridges(self) -> bool:
         """Whether ``fs3d fuse --photometric`` fitted its surfaces to the very ridge agreement the warp check measures."""
         import json

@@ -121,15 +121,27 @@ class PhotometricTerm(torch.nn.Module):
         return depth
 
     def _carried(self, s: _Samples, u: int, cameras, scales) -> tuple[torch.Tensor, torch.Tensor]:
-        """Sample pixels of view ``s.view`` carried into view ``u``: ``(uv_u [S, 2], depth in u [S])``."""
+        """Sample pixels of view ``s.view`` lifted onto its surface and projected into view ``u``:
+        ``(uv_u [S, 2], world points [S, 3])``."""
         rotations, translations, focals = cameras
         p, count = self.problem, len(s.z)
         points = _lift(rotations[s.view].expand(count, 3, 3), translations[s.view].expand(count, 3),
                        focals[s.view].expand(count), p.centres[s.view].expand(count, 2), s.uv, self.sample_depth(s, scales))
         uv = _project(rotations[u].expand(count, 3, 3), translations[u].expand(count, 3), focals[u].expand(count),
                       p.centres[u].expand(count, 2), points)
-        camera = torch.einsum("ji,nj->ni", rotations[u], points - translations[u])
-        return uv, camera[:, 2]
+        return uv, points
+
+    def _compared(self, min_count: int = 1):
+        """For every sample set and other view that sees at least ``min_count`` of its samples: ``(samples, u,
+        visible indices, u's texture where they land)``."""
+        cameras, scales = self.problem.cameras(), self.problem.scales()
+        for s in self.samples:
+            for u in range(len(self.aligned)):
+                keep = self.visible.get((s.view, u))
+                if keep is None or keep.numel() < min_count:
+                    continue
+                uv, _ = self._carried(s, u, cameras, scales)
+                yield s, u, keep, sample_bilinear_torch(self.textures[u], uv[keep])
 
     def update_visibility(self, dense_depths: Sequence[np.ndarray]) -> None:
         """Which samples each other view sees (on its finger, its own surface not nearer by more than 2 %), and
@@ -140,6 +152,8 @@ class PhotometricTerm(torch.nn.Module):
         with torch.no_grad():
             cameras, scales = self.problem.cameras(), self.problem.scales()
             rotations, translations, focals = cameras
+            on_finger = [np.where(mask, depth, np.nan) for mask, depth in zip(self.masks, dense_depths)]
+            tolerances = [surface_tolerance(depth) for depth in dense_depths]
             for s in self.samples:
                 v = s.view
                 normal, points = _surface_normals(dense_depths[v], s.uv.numpy(), float(focals[v]), self.problem.centres[v].numpy())
@@ -149,28 +163,23 @@ class PhotometricTerm(torch.nn.Module):
                 for u in range(len(self.aligned)):
                     if u == v or not self.aligned[u]:
                         continue
-                    uv, z = self._carried(s, u, cameras, scales)
-                    seen = sample_nearest(np.where(self.masks[u], dense_depths[u], np.nan), uv.numpy())
+                    uv, carried = self._carried(s, u, cameras, scales)
+                    z = ((carried - translations[u]) @ rotations[u])[:, 2].numpy()  # depth in u's camera
+                    seen = sample_nearest(on_finger[u], uv.numpy())
                     to_u = translations[u].numpy() - world_points
                     facing_u = np.abs(np.sum(world_normal * to_u, 1)) / np.maximum(np.linalg.norm(to_u, axis=1), 1e-12)
                     weight = facing_weight(np.minimum(facing_v, facing_u))
-                    ok = np.isfinite(seen) & (np.abs(seen - z.numpy()) <= surface_tolerance(dense_depths[u])) & (weight > 0)
+                    ok = np.isfinite(seen) & (np.abs(seen - z) <= tolerances[u]) & (weight > 0)
                     index = np.flatnonzero(ok)
                     self.visible[(v, u)] = torch.as_tensor(index)
                     self.weights[(v, u)] = torch.as_tensor(weight[index])
 
     def residuals(self) -> tuple[torch.Tensor, torch.Tensor]:
         """Texture differences of every visible sample, for every other view that sees it, and their weights."""
-        cameras, scales = self.problem.cameras(), self.problem.scales()
         out, weights = [], []
-        for s in self.samples:
-            for u in range(len(self.aligned)):
-                keep = self.visible.get((s.view, u))
-                if keep is None or keep.numel() == 0:
-                    continue
-                uv, _ = self._carried(s, u, cameras, scales)
-                out.append(sample_bilinear_torch(self.textures[u], uv[keep]) - s.texture[keep])
-                weights.append(self.weights[(s.view, u)])
+        for s, u, keep, theirs in self._compared():
+            out.append(theirs - s.texture[keep])
+            weights.append(self.weights[(s.view, u)])
         if not out:
             return torch.zeros(0, dtype=torch.float64), torch.zeros(0, dtype=torch.float64)
         return torch.cat(out), torch.cat(weights)
@@ -199,19 +208,11 @@ class PhotometricTerm(torch.nn.Module):
     def mean_agreement(self) -> float:
         """Correlation of the carried and own textures over every visible sample (1: ridges in phase)."""
         with torch.no_grad():
-            cameras, scales = self.problem.cameras(), self.problem.scales()
-            mine, theirs = [], []
-            for s in self.samples:
-                for u in range(len(self.aligned)):
-                    keep = self.visible.get((s.view, u))
-                    if keep is None or keep.numel() < 2:
-                        continue
-                    uv, _ = self._carried(s, u, cameras, scales)
-                    theirs.append(sample_bilinear_torch(self.textures[u], uv[keep]))
-                    mine.append(s.texture[keep])
-            if not mine:
+            pairs = [(s.texture[keep], theirs) for s, _, keep, theirs in self._compared(min_count=2)]
+            if not pairs:
                 return float("nan")
-            return float(np.corrcoef(torch.cat(mine).numpy(), torch.cat(theirs).numpy())[0, 1])
+            mine, theirs = (torch.cat(side).numpy() for side in zip(*pairs))
+            return float(np.corrcoef(mine, theirs)[0, 1])
 
 
 FACING_LOW, FACING_HIGH = 0.25, 0.6
@@ -310,7 +311,7 @@ def refine_alignment(alignment, depths: Sequence[np.ndarray], focal_guess, pairs
 
 def _lbfgs(term: PhotometricTerm, parameters: list[torch.nn.Parameter], iterations: int) -> None:
     """``iterations`` of L-BFGS on ``parameters`` alone (the others held)."""
-    everything = [p for p in term.parameters()] + [p for p in term.problem.parameters()]
+    everything = list(term.parameters())  # the problem's too: it is a submodule of the term
     held = {id(p): p.requires_grad for p in everything}
     chosen = {id(p) for p in parameters}
     for p in everything:
