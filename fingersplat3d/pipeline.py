@@ -474,7 +474,9 @@ def write_reconstruction_files(result: Reconstruction, temporary: Path) -> None:
     write_fused_cloud(temporary / "fused.ply", result.cloud)
     entries = [(view.name, result.capture.metadata.get("sources", {}).get(view.name, f"images/{view.name}.png"), camera)
                for view, camera in zip(result.capture.views, result.cameras)]
-    write_cameras(temporary / "cameras.json", entries, units=result.units, scale_mm_per_unit=result.scale_mm_per_unit)
+    # In mm the reconstruction is already scaled (report.json keeps the factor): cameras.json says mm, scale null.
+    write_cameras(temporary / "cameras.json", entries, units=result.units,
+                  scale_mm_per_unit=None if result.units == "mm" else result.scale_mm_per_unit)
     for view, depth in zip(result.capture.views, result.depths):
         write_view_depth(temporary, view.name, depth, units="mm" if result.units == "mm" else "arbitrary")
     if result.gaussians is not None:

@@ -106,7 +106,11 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     assert main(["render", str(out)]) == 2  # renders/ exists: refuses without --overwrite
     # The same images given as a list of files.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
-    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat"]) == 0
+    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat", "--px-per-mm", "17.8"]) == 0
+    # A metric reconstruction says mm in cameras.json (the factor that made it so is in report.json).
+    cameras = json.loads((tmp_path / "from_files" / "cameras.json").read_text())
+    assert cameras["units"] == "mm" and cameras["scale_mm_per_unit"] is None
+    assert json.loads((tmp_path / "from_files" / "report.json").read_text())["scale_mm_per_unit"] > 0
 
 
 def test_cli_fuse_refuses_bad_input(tmp_path, capsys):

@@ -26,7 +26,7 @@ LAYERS = [
     {"splat"},
     {"synth"},
     {"io", "mesh", "viz"},
-    {"pipeline"},
+    {"pipeline", "prints"},
     {"batch", "experiments"},
     {"cli"},
 ]

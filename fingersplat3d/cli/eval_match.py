@@ -22,12 +22,16 @@ def add(actions) -> None:
                     "minutiae (mindtct) and NFIQ2, and score every two photos of different captures seen by the same "
                     "camera with bozorth3: genuine when the finger is the same (read from the file names), impostor "
                     "otherwise. With --reconstructions, each model is rendered at --angles about its rig axis and "
-                    "compared with the real photos of the finger's other captures (and of other fingers). Writes "
+                    "compared with the real photos of the finger's other captures (and of other fingers). With --rolled, the "
+                    "rolled-equivalent print of each model is compared with the other models' and with the photos. Writes "
                     "scores.csv, prints.csv, prints/, summary.md (EER, FNMR at FMR 1 % and 0.01 %, FMR_zero, "
                     "scores by angle) and det.png.")
     match.add_argument("inputs", nargs="+", type=Path, help="photos, or folders of photos")
     match.add_argument("--reconstructions", nargs="+", type=Path, default=[], metavar="REC",
                        help="reconstruction folders from 'fs3d fuse' (with their Gaussians) to synthesize views from")
+    match.add_argument("--rolled", nargs="+", type=Path, default=[], metavar="REC",
+                       help="reconstruction folders from 'fs3d fuse' whose rolled-equivalent prints (fs3d print) are "
+                            "compared with each other and with the photos of the other captures")
     match.add_argument("--naming", default=UWA_NAMING,
                        help="regular expression on file stems with named groups 'capture' and 'finger' (or "
                             "'subject' and 'hand'), optional 'view' and 'session'; default: the UWA 3D/2D naming "
@@ -56,12 +60,12 @@ def run(args: argparse.Namespace) -> int:
     if len({s.capture for s in samples}) < 2:
         raise InputError(f"{len(samples)} photos from {len({s.capture for s in samples})} capture(s): matching needs "
                          "photos of at least two captures, named so that the finger and capture can be read")
-    for folder in args.reconstructions:
+    for folder in [*args.reconstructions, *args.rolled]:
         if not (folder / "cameras.json").is_file():
             raise InputError(f"{folder}: not a reconstruction folder (no cameras.json; make one with 'fs3d fuse')")
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
-                                       naming=args.naming, ridges=args.ridges)
+                                       naming=args.naming, ridges=args.ridges, rolled=args.rolled)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

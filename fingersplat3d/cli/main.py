@@ -21,6 +21,7 @@ from . import (
     fuse,
     info,
     preview,
+    prints,
     register,
     render,
     rig,
@@ -29,7 +30,7 @@ from . import (
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = (synth, fuse, info, preview, render, batch, rig)
+COMMANDS = (synth, fuse, info, preview, render, prints, batch, rig)
 EVAL_ACTIONS = (eval_depth, eval_match, eval_register, eval_quality)
 
 

@@ -12,6 +12,11 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
   for the same finger, impostor for other fingers. Scores by angle give the paper's
   angle-difference table.
 
+* **rolled** (with ``rolled`` reconstruction folders; no Gaussians needed): the rolled-equivalent
+  print of each model (:mod:`fingersplat3d.prints`) against the rolled prints of the other captures'
+  models (genuine for the same finger), and, as **rolled vs photos**, against the real photos of the
+  gallery view of every other capture.
+
 Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`) and goes
 through NIST's tools (:mod:`fingersplat3d.eval.fingerprint`). Error rates:
 :func:`fingersplat3d.eval.verification.error_rates`. Writes ``scores.csv``, ``prints.csv`` (per
@@ -154,9 +159,32 @@ def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, p
     return finger, capture, gallery_view, results
 
 
+def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str):
+    """The rolled-equivalent print of a reconstruction: ``(finger, capture, gallery view, print)``."""
+    from ..eval.contact import ContactImage
+    from ..eval.fingerprint import analyse
+    from ..prints.make import print_reconstruction
+    from ..splat.camera_path import middle_camera
+
+    cameras, identities = _reconstruction_identity(folder, pattern)
+    finger, capture = identities[0][0], identities[0][1]
+    name = f"{folder.name}@rolled"
+    try:
+        gallery_view = identities[middle_camera(list(cameras.cameras.values()))][2]
+    except ValueError:
+        gallery_view = identities[0][2]
+    try:
+        result, _, _ = print_reconstruction(folder, ridges=ridges)
+    except FS3DError as error:
+        return finger, capture, gallery_view, _Print(name, None, str(error))
+    cv2.imwrite(str(prints / f"{name}.png"), result.image)
+    fingerprint = analyse(ContactImage(result.image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), result.period_px, 1.0))
+    return finger, capture, gallery_view, _Print(name, fingerprint, fingerprint.failure)
+
+
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
-                         progress: bool = True) -> dict:
+                         progress: bool = True, rolled: list[Path] = ()) -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary."""
     from tqdm import tqdm
 
@@ -176,6 +204,8 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
         real.append(_print_of(sample.name, image, None, prints, ridges))
     synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
                    for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
+    unrolled = [_rolled(folder, pattern, prints, ridges)
+                for folder in tqdm(rolled, desc="prints (rolled)", unit="model", disable=not progress)]
     rows = []
     for i, j, genuine in real_pairs(samples):
         a, b = real[i].fingerprint, real[j].fingerprint
@@ -191,7 +221,20 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                     rows.append({"protocol": "synthesized", "probe": render.name, "gallery": sample.name,
                                  "genuine": int(sample.finger == finger), "angle_deg": angle,
                                  "score": match_score(render.fingerprint, real[k].fingerprint)})
-    all_prints = real + [p for *_, renders in synthesized for _, p in renders]
+    for i, (finger_a, capture_a, _, print_a) in enumerate(unrolled):
+        if print_a.fingerprint is None:
+            continue
+        for finger_b, capture_b, _, print_b in unrolled[i + 1:]:
+            if capture_b != capture_a and print_b.fingerprint is not None:
+                rows.append({"protocol": "rolled", "probe": print_a.name, "gallery": print_b.name,
+                             "genuine": int(finger_a == finger_b), "angle_deg": "",
+                             "score": match_score(print_a.fingerprint, print_b.fingerprint)})
+        for k, sample in enumerate(samples):
+            if sample.capture != capture_a and sample.view == unrolled[i][2] and real[k].fingerprint is not None:
+                rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
+                             "genuine": int(sample.finger == finger_a), "angle_deg": "",
+                             "score": match_score(print_a.fingerprint, real[k].fingerprint)})
+    all_prints = real + [p for *_, renders in synthesized for _, p in renders] + [p for *_, p in unrolled]
     write_rows(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
@@ -223,7 +266,7 @@ def summarise(rows: list[dict], prints: list[_Print]) -> dict:
     from ..eval.verification import error_rates
 
     protocols = {}
-    for protocol in ("real", "synthesized"):
+    for protocol in ("real", "synthesized", "rolled", "rolled vs photos"):
         genuine, impostor = _split(rows, protocol)
         if genuine and impostor:
             protocols[protocol] = error_rates(genuine, impostor)

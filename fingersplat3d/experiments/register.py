@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass
-from functools import cached_property
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from ..errors import FS3DError, InputError
+from ..io.reconstruction_folder import ReconstructionFolder
 from .tables import write_rows
 
 __all__ = ["PAPER_FIGURES", "Mates", "default_pairs", "read_mates_csv", "truth_mates", "matcher_mates",
@@ -122,62 +122,7 @@ def matcher_mates(photo_a: np.ndarray, photo_b: np.ndarray) -> Mates:
     return Mates(a.minutiae[index_a, :2], b.minutiae[index_b, :2], "mindtct + bozorth3-style pairing")
 
 
-class _Reconstruction:
-    """What the experiment reads of a reconstruction folder."""
-
-    def __init__(self, folder: Path, photos: dict[str, Path] | None = None):
-        from ..io.cameras import read_cameras
-
-        if not (folder / "cameras.json").is_file():
-            raise InputError(f"{folder}: not a reconstruction folder (no cameras.json; make one with 'fs3d fuse')")
-        self.folder = folder
-        self.cameras = read_cameras(folder / "cameras.json")
-        self._photos = photos or {}
-
-    @cached_property
-    def fitted_to_ridges(self) -> bool:
-        """Whether ``fs3d fuse --photometric`` fitted its surfaces to the very ridge agreement the warp check measures."""
-        import json
-
-        try:
-            report = json.loads((self.folder / "report.json").read_text())
-        except (OSError, ValueError):
-            return False
-        return bool(report.get("registration", {}).get("photometric")) if isinstance(report, dict) else False
-
-    def depth(self, name: str) -> np.ndarray:
-        from ..io.depth import read_depth
-
-        camera = self.cameras.cameras[name]
-        return read_depth(self.folder / "depth" / f"{name}.npy", (camera.height, camera.width))
-
-    def photo_path(self, name: str) -> Path | None:
-        listed = Path(self.cameras.images[name])
-        for candidate in (self._photos.get(name), listed, self.folder / listed, self.folder.parent / listed):
-            if candidate is not None and Path(candidate).is_file():
-                return Path(candidate)
-        return None
-
-    def photo(self, name: str) -> np.ndarray:
-        from ..io.images import read_image
-
-        path = self.photo_path(name)
-        if path is None:
-            raise InputError(f"view {name!r}'s photo {self.cameras.images[name]!r} was not found")
-        return read_image(path)
-
-    def minutiae(self) -> dict | None:
-        """``minutiae.json`` of the capture the photos came from (beside its ``images/``), if any."""
-        from ..io.minutiae import read_minutiae
-
-        for name in self.cameras.names:
-            path = self.photo_path(name)
-            if path is not None and path.parent.name == "images" and (path.parent.parent / "minutiae.json").is_file():
-                return read_minutiae(path.parent.parent / "minutiae.json")
-        return None
-
-
-def _errors(mates: Mates, rec: _Reconstruction, view_a: str, view_b: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def _errors(mates: Mates, rec: ReconstructionFolder, view_a: str, view_b: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per-method error (px) on the mates 3D could carry, and the 3D predictions of all mates."""
     from ..align.transfer import transfer_points
     from ..eval.warp2d import BASELINES, cross_validated_errors
@@ -191,7 +136,7 @@ def _errors(mates: Mates, rec: _Reconstruction, view_a: str, view_b: str) -> tup
     return errors, np.where(scored[:, None], carried, np.nan)
 
 
-def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: "_Reconstruction", view_a: str, view_b: str) -> dict:
+def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: ReconstructionFolder, view_a: str, view_b: str) -> dict:
     """A check of the 3D registration that needs no mates: photo A warped into B through the model,
     both as ridge texture (band-passed, unit local RMS) where both see the finger; the global shift
     between them by phase correlation (px; ~0 when the model carries A onto B) and their normalised
@@ -232,7 +177,7 @@ def _picture(path: Path, photo_b: np.ndarray, mates: Mates, predictions: dict[st
     cv2.imwrite(str(path), canvas)
 
 
-def _mates_for(rec: _Reconstruction, view_a: str, view_b: str, user: dict | None, truth: dict | None) -> Mates:
+def _mates_for(rec: ReconstructionFolder, view_a: str, view_b: str, user: dict | None, truth: dict | None) -> Mates:
     if user is not None:
         table = user.get((view_a, view_b))
         if table is None:
@@ -248,7 +193,7 @@ def _mates_for(rec: _Reconstruction, view_a: str, view_b: str, user: dict | None
     return matcher_mates(rec.photo(view_a), rec.photo(view_b))
 
 
-def evaluate_pair(rec: _Reconstruction, view_a: str, view_b: str, user: dict | None, truth: dict | None,
+def evaluate_pair(rec: ReconstructionFolder, view_a: str, view_b: str, user: dict | None, truth: dict | None,
                   out: Path) -> list[dict]:
     """The rows of one pair of views (one per method), its mates CSV and its picture."""
     base = {"reconstruction": rec.folder.name, "view_a": view_a, "view_b": view_b}
@@ -304,7 +249,7 @@ def run_register_evaluation(folders: list[Path], out: Path, *, pairs: list[tuple
         (out / sub).mkdir(parents=True, exist_ok=True)
     jobs = []
     for folder in folders:
-        rec = _Reconstruction(folder)
+        rec = ReconstructionFolder(folder)
         chosen = pairs or default_pairs(rec.cameras)
         for a, b in chosen:
             for name in (a, b):

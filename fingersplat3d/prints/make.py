@@ -1,0 +1,185 @@
+"""``fs3d print``'s work: a print per input, its files and its row of ``prints.csv``.
+
+* A reconstruction folder (``fs3d fuse -o``): its rolled-equivalent print
+  (:mod:`fingersplat3d.prints.rolled`) from its depth maps, cameras and photos. The finger of each
+  view is where its depth map has values. The scale, in this order: ``cameras.json`` in mm (a rig
+  or synthetic cameras), ``--px-per-mm`` (the photos' pixels per mm at the finger), or the ridge
+  period (9 px at 500 ppi, as for the photos' prints): first the photos' median period, then the
+  print's own (measured on the flattened skin, it is not shortened toward the photos' rims, so it is
+  the same whatever the finger's roll; the print is redone when the two differ by more than 3 %).
+* An image file: its contact-like print (:func:`fingersplat3d.eval.contact.contact_like`), on any
+  background the finger mask handles.
+
+Writes ``OUT/<name>.png`` (8-bit gray, ridges dark, white outside the skin), ``OUT/masks/<name>.png``,
+``OUT/points/<name>.npy`` (rolled prints: ``[H, W, 3]`` float32 model points per print pixel, NaN
+outside: minutiae found on the print carried to the model, and through ``cameras.json`` to every
+photo), ``OUT/pictures/<name>.png`` (the print beside its source) and ``OUT/prints.csv``. An input that
+gives no print is a ``failed`` row with its reason; the others are still made.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import FS3DError, InputError
+from ..eval.contact import TARGET_PERIOD_PX, ContactImage
+from .rolled import RolledEquivalent
+
+__all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "print_photo", "ROLLED_PPI"]
+
+ROLLED_PPI = 500.0
+PERIOD_SLACK = 0.03  # a print scaled by the ridge period is redone when its own period is off by more than this
+COLUMNS = ("name", "source", "kind", "status", "reason", "ppi", "scale_from", "width_px", "height_px", "area_mm2",
+           "coverage_deg", "nfiq2", "minutiae", "nfiq2_note", "seconds")
+PICTURE_HEIGHT = 480
+POINTS_PER_VIEW = 80_000  # model points per view the chart is made from (the depth map, strided)
+
+
+def print_reconstruction(folder: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
+                         ridges: str = "bright") -> tuple[RolledEquivalent, str, np.ndarray]:
+    """``(print, where its scale came from, the photo it owes most to)`` of a reconstruction folder."""
+    from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
+    from ..io.reconstruction_folder import ReconstructionFolder
+    from ..segment.silhouette import orient_frames
+    from .skin_chart import finger_frame, skin_chart
+    from .rolled import PrintView, default_px_per_unit, rolled_print
+
+    rec = ReconstructionFolder(folder)
+    names = [name for name in rec.names if rec.has_depth(name)]
+    if not names:
+        raise InputError(f"{folder}: the reconstruction has no depth maps (depth/<view>.npy): nothing to unroll")
+    views, periods, points, photos = [], [], [], []
+    for name in names:
+        depth = rec.depth(name)
+        mask = np.isfinite(depth)
+        if mask.sum() < 64:
+            continue
+        gray = as_gray(rec.photo(name), name=f"view {name!r}'s photo")
+        if gray.shape != depth.shape:
+            raise InputError(f"view {name!r}: its photo is {gray.shape[1]}x{gray.shape[0]}, its depth map "
+                             f"{depth.shape[1]}x{depth.shape[0]}")
+        area = ridge_area(mask) & mask
+        period = estimate_ridge_period(gray, area)
+        camera = rec.cameras.cameras[name]
+        views.append(PrintView(name, camera, depth, ridge_texture(gray, area, period), area))
+        periods.append(period)
+        photos.append(gray)
+        cloud = camera.depth_to_points(depth)[mask]
+        points.append(cloud[:: max(1, len(cloud) // POINTS_PER_VIEW)])
+    if not views:
+        raise InputError(f"{folder}: no view's depth map covers a finger")
+    frames = orient_frames([view.area if view.area.sum() >= 64 else np.isfinite(view.depth) for view in views])
+    axes = [(frame.origin, frame.axis) for frame in frames]
+    cloud = np.concatenate(points)
+    chart = skin_chart(cloud, finger_frame(cloud, [view.camera for view in views], axes),
+                       tip_visible=any(frame.tip_found for frame in frames))
+    if rec.cameras.units == "mm" or rec.cameras.scale_mm_per_unit is not None:
+        mm_per_unit = 1.0 if rec.cameras.units == "mm" else float(rec.cameras.scale_mm_per_unit)
+        scale, scale_from = ppi / 25.4 * mm_per_unit, "cameras (mm)"
+    elif px_per_mm is not None:
+        per_view = [float(view.camera.K[0, 0]) / (float(np.nanmedian(view.depth)) * px_per_mm) for view in views]
+        scale, scale_from = ppi / 25.4 * float(np.median(per_view)), "--px-per-mm"
+    else:
+        scale, scale_from = default_px_per_unit(views, periods) * ppi / ROLLED_PPI, "ridge period"
+    result = rolled_print(chart, views, scale, ridges=ridges)
+    if scale_from == "ridge period" and abs(result.period_px / (TARGET_PERIOD_PX * ppi / ROLLED_PPI) - 1) > PERIOD_SLACK:
+        # The photos foreshorten the ridges toward their rims; the print does not: its own period sets the scale.
+        result = rolled_print(chart, views, scale * TARGET_PERIOD_PX * ppi / ROLLED_PPI / result.period_px, ridges=ridges)
+    source = photos[int(np.argmax([result.view_share[view.name] for view in views]))]
+    return result, scale_from, source
+
+
+def print_photo(path: Path, *, ridges: str = "bright") -> tuple[ContactImage, np.ndarray]:
+    """The contact-like print of one photo, and the photo (gray)."""
+    from ..align.correspond.texture import as_gray
+    from ..eval.contact import contact_like
+    from ..io.images import read_image
+    from ..segment.masks import finger_mask
+
+    image = read_image(path)
+    gray = as_gray(image, name=str(path))
+    return contact_like(gray, finger_mask(gray, name=path.name), ridges=ridges), gray
+
+
+def _picture(source: np.ndarray, printed: np.ndarray) -> np.ndarray:
+    """The source photo (gray, [0, 1]) beside the print (uint8), both ``PICTURE_HEIGHT`` tall."""
+    tiles = []
+    for part in ((np.clip(source, 0, 1) * 255).astype(np.uint8), printed):
+        scale = PICTURE_HEIGHT / part.shape[0]
+        size = (max(1, int(round(part.shape[1] * scale))), PICTURE_HEIGHT)
+        tiles.append(cv2.resize(part, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR))
+        tiles.append(np.full((PICTURE_HEIGHT, 12), 255, np.uint8))
+    return np.hstack(tiles[:-1])
+
+
+def nfiq2_region(image: np.ndarray, centre_x: float | None = None) -> np.ndarray:
+    """The part of a print NFIQ2 can score (at most 799 x 999 px of skin, white margins): a rolled print wider than
+    that keeps the middle around ``centre_x`` (the pad's centre line; default the skin's middle), a longer one its tip."""
+    from ..eval.contact import MARGIN, MAX_SIZE
+
+    rows, cols = np.nonzero(image < 255)
+    if rows.size == 0:
+        return image
+    width_cap, height_cap = MAX_SIZE[0] - 2 * MARGIN, MAX_SIZE[1] - 2 * MARGIN
+    left, right, top, bottom = int(cols.min()), int(cols.max()) + 1, int(rows.min()), int(rows.max()) + 1
+    if right - left > width_cap:
+        middle = 0.5 * (left + right) if centre_x is None else float(centre_x)
+        left = int(np.clip(round(middle - width_cap / 2), left, right - width_cap))
+        right = left + width_cap
+    bottom = min(bottom, top + height_cap)
+    region = np.full((bottom - top + 2 * MARGIN, right - left + 2 * MARGIN), 255, np.uint8)
+    region[MARGIN:-MARGIN, MARGIN:-MARGIN] = image[top:bottom, left:right]
+    return region
+
+
+def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> dict:
+    """NFIQ2 and the mindtct minutiae count of a print (blank when NIST's tools are not installed); a print larger
+    than NFIQ2 takes is scored on its middle (:func:`nfiq2_region`), and the note says so."""
+    from ..eval.fingerprint import analyse, nbis_available
+
+    if not nfiq2 or not nbis_available():
+        return {}
+    region = nfiq2_region(image, centre_x)
+    found = analyse(ContactImage(region, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0))
+    note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if region.shape != image.shape else "")
+    return {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
+
+
+def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
+               ridges: str = "bright", nfiq2: bool = True) -> dict:
+    """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason)."""
+    from ..io.images import write_image
+
+    started = time.perf_counter()
+    row = {"name": name, "source": str(source)}
+    try:
+        if source.is_dir():
+            result, scale_from, photo = print_reconstruction(source, px_per_mm=px_per_mm, ppi=ppi, ridges=ridges)
+            image, mask, centre_x = result.image, result.mask, result.origin_px[0]
+            per_mm = ppi / 25.4
+            row.update(kind="rolled", ppi=ppi, scale_from=scale_from, coverage_deg=round(result.coverage_deg, 1))
+            (out / "points").mkdir(exist_ok=True)
+            np.save(out / "points" / f"{name}.npy", result.points)
+        elif source.is_file():
+            contact, photo = print_photo(source, ridges=ridges)
+            image, mask, centre_x = contact.image, contact.image < 255, None
+            per_mm = ROLLED_PPI / 25.4
+            row.update(kind="photo", ppi=ROLLED_PPI, scale_from="ridge period", coverage_deg="")
+        else:
+            raise InputError(f"{source}: no such file or folder")
+    except (FS3DError, OSError, ValueError) as error:
+        row.update(status="failed", reason=str(error).splitlines()[0] if str(error) else type(error).__name__,
+                   seconds=round(time.perf_counter() - started, 2))
+        return row
+    for folder in ("masks", "pictures"):
+        (out / folder).mkdir(exist_ok=True)
+    write_image(out / f"{name}.png", image.astype(np.float32) / 255.0)
+    write_image(out / "masks" / f"{name}.png", mask.astype(np.float32))
+    write_image(out / "pictures" / f"{name}.png", _picture(photo, image).astype(np.float32) / 255.0)
+    scores = _scores(image, nfiq2, centre_x)
+    row.update(status="done", reason="", width_px=image.shape[1], height_px=image.shape[0],
+               area_mm2=round(float(mask.sum()) / per_mm ** 2, 1), **scores, seconds=round(time.perf_counter() - started, 2))
+    return row

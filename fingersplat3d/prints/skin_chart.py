@@ -1,0 +1,279 @@
+"""The skin chart of a reconstructed finger: its surface unrolled by arc length, as a rolled print lays it flat.
+
+A rolled impression records the skin of the pad rolled across the paper from one side of the nail to
+the other: distances along the skin become distances on the print. The chart here gives every point
+of the model's surface two such distances:
+
+1. **The finger's frame.** The axis is the direction every view's silhouette axis is the image of
+   (each view's axis line and its camera centre span a plane that holds the 3D axis: the axis is
+   their common direction, by SVD), pointed toward the tip the silhouettes found; with one view, or
+   views that all look from one side, the longest direction of the points (PCA). The pad is the side
+   the cameras look at (their mean direction to the finger, across the axis); ``side = axis x pad``
+   is a frontal photo's right with the tip up, so the print has a photo's handedness.
+2. **The section's centre line.** Per 1-mm-ish station, a circle fitted to the points' section
+   (Kasa's algebraic fit); a quadratic in the axis coordinate through those centres (the finger
+   bends a little). The axis is then turned onto the centre line's direction at its middle and the
+   fit redone (:data:`AXIS_ROUNDS`): the silhouettes do not see the finger's pitch toward a camera,
+   and rings across a pitched axis put the pad's centre a few pixels above or below its sides on the
+   print (measured on synthetic fingers: minutiae located within 8 px 70 % -> see tools/bench_print.py).
+3. **The radius grid.** ``rho(x, phi)``: the mean radius of the model's points per cell of a grid of
+   stations ``x`` along the axis and azimuths ``phi`` around it (2 degree cells; the station step is
+   the arc of one cell at the median radius, so cells are square on the skin), smoothed by a
+   normalised Gaussian of :data:`SMOOTHING_CELLS` (holes of a cell or two filled), azimuth periodic.
+4. **Arc lengths.** ``b``: around each ring from the pad's centre line (``phi = 0``), the summed
+   lengths of the grid's segments, signed toward ``side``; ``a``: along each meridian from the tip
+   end of the grid. That is the chart ``fs3d synth`` lays its ridges on
+   (:mod:`fingersplat3d.synth.shape`): near-isometric on the body of the finger, where rings and
+   meridians meet at right angles, sheared over the tip cap; measured against the true rolled print
+   in ``tools/bench_print.py``.
+
+Pure numpy/scipy; units are the model's.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import InputError
+from ..scene import Camera
+
+__all__ = ["FingerFrame", "SkinChart", "finger_frame", "skin_chart", "PHI_STEP_DEG"]
+
+PHI_STEP_DEG = 2.0  # azimuth cell of the radius grid
+AXIS_ROUNDS = 2  # times the axis is turned onto the fitted centre line (step 2)
+MIN_POINTS = 200  # fewer model points than this make no chart
+SMOOTHING_CELLS = 2.5
+"""Gaussian smoothing of the radius grid, in cells (~0.7 mm on an adult finger): depth rendered from Gaussians is
+rough at the ridges' scale, and a chart that followed it would shift the photos' ridges by a fraction of a period
+from node to node (measured: a one-cell smoothing left the ridges of the sample's print broken)."""
+_PLANES_SPREAD = 0.05  # second singular value of the silhouette planes' normals, relative: below, one-sided views
+
+
+@dataclass(frozen=True, eq=False)
+class FingerFrame:
+    """Axis (toward the tip), pad and side directions, and a point near the axis (world units)."""
+
+    axis: np.ndarray  # [3] unit
+    pad: np.ndarray  # [3] unit, across the axis, out of the pad (phi = 0)
+    side: np.ndarray  # [3] unit, axis x pad: b grows this way
+    origin: np.ndarray  # [3]
+    axis_from: str  # "silhouettes" | "points"
+
+    def local(self, points: np.ndarray) -> np.ndarray:
+        """World points ``[..., 3]`` -> ``(x along the axis, u toward the pad, w toward the side)``."""
+        rel = np.asarray(points, np.float64) - self.origin
+        return np.stack([rel @ self.axis, rel @ self.pad, rel @ self.side], -1)
+
+    def world(self, local: np.ndarray) -> np.ndarray:
+        local = np.asarray(local, np.float64)
+        return self.origin + local[..., :1] * self.axis + local[..., 1:2] * self.pad + local[..., 2:3] * self.side
+
+
+@dataclass(frozen=True, eq=False)
+class SkinChart:
+    """The radius grid's nodes, their arc-length coordinates and outward normals (``[X, P]`` arrays)."""
+
+    frame: FingerFrame
+    points: np.ndarray  # [X, P, 3] world, NaN where the model has no surface
+    normals: np.ndarray  # [X, P, 3] unit, outward
+    a: np.ndarray  # [X, P] arc length from the tip end along the meridians (NaN off the surface)
+    b: np.ndarray  # [X, P] signed arc length around the rings from the pad's centre line
+    x: np.ndarray  # [X] station coordinates along the axis (increasing toward the tip)
+    phi: np.ndarray  # [P] azimuths (radians, -pi..pi)
+
+    @property
+    def valid(self) -> np.ndarray:
+        return np.isfinite(self.a) & np.isfinite(self.b) & np.isfinite(self.points).all(-1)
+
+    @property
+    def node_spacing(self) -> float:
+        """The typical distance between neighbouring nodes (model units)."""
+        return float(self.x[1] - self.x[0]) if len(self.x) > 1 else 1.0
+
+
+def finger_frame(points: np.ndarray, cameras: Sequence[Camera], axes_2d: Sequence[tuple[np.ndarray, np.ndarray]]) -> FingerFrame:
+    """The finger's frame (module docstring, step 1) from its points ``[N, 3]`` and, per view, its camera and
+    silhouette axis ``(origin uv, unit direction toward the tip)``."""
+    points = np.asarray(points, np.float64)
+    if len(points) < MIN_POINTS:
+        raise InputError(f"the model has {len(points)} surface points: too few to unroll")
+    centroid = points.mean(0)
+    normals, tips = [], []
+    for camera, (origin, direction) in zip(cameras, axes_2d):
+        rays = camera.pixel_directions(np.array([origin, origin + 50.0 * np.asarray(direction)])) @ camera.rotation
+        normal = np.cross(rays[0], rays[1])
+        if np.linalg.norm(normal) > 0:
+            normals.append(normal / np.linalg.norm(normal))
+            tips.append((camera, rays[0], np.asarray(direction, np.float64)))
+    axis, axis_from = None, "points"
+    if len(normals) >= 2:
+        _, values, vectors = np.linalg.svd(np.array(normals))
+        if values[1] > _PLANES_SPREAD * values[0]:
+            axis, axis_from = vectors[-1], "silhouettes"
+    if axis is None:
+        _, _, vectors = np.linalg.svd(points - centroid, full_matrices=False)
+        axis = vectors[0]
+    # Toward the tip: the way the views' silhouettes say it points, each seen in its image.
+    vote = 0.0
+    for camera, ray, direction in tips:
+        along = camera.rotation @ axis
+        ray_cam = camera.rotation @ ray
+        image_direction = along[:2] - ray_cam[:2] / ray_cam[2] * along[2]
+        vote += float(np.sign(image_direction @ direction))
+    axis = axis if vote >= 0 else -axis
+    toward_cameras = np.mean([c.center - centroid for c in cameras], 0) if len(cameras) else np.zeros(3)
+    pad = toward_cameras - (toward_cameras @ axis) * axis
+    if np.linalg.norm(pad) < 1e-9:  # no camera off the axis: any direction across it
+        pad = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    pad = pad / np.linalg.norm(pad)
+    return FingerFrame(axis, pad, np.cross(axis, pad), centroid, axis_from)
+
+
+def _turned(frame: FingerFrame, slope: np.ndarray) -> FingerFrame:
+    """``frame`` with its axis turned onto the direction ``axis + slope[0] pad + slope[1] side``."""
+    axis = frame.axis + slope[0] * frame.pad + slope[1] * frame.side
+    axis = axis / np.linalg.norm(axis)
+    pad = frame.pad - (frame.pad @ axis) * axis
+    pad = pad / np.linalg.norm(pad)
+    return FingerFrame(axis, pad, np.cross(axis, pad), frame.origin, frame.axis_from)
+
+
+def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
+    """Quadratic coefficients ``[3, 2]`` of the section centre ``(u, w)`` against ``x`` (module docstring, step 2)."""
+    x, u, w = local.T
+    edges = np.arange(x.min(), x.max() + station, station)
+    found = []
+    for low in edges[:-1]:
+        inside = (x >= low) & (x < low + station)
+        if inside.sum() < 30:
+            continue
+        uu, ww = u[inside], w[inside]
+        design = np.column_stack([uu, ww, np.ones_like(uu)])
+        solution, *_ = np.linalg.lstsq(design, uu * uu + ww * ww, rcond=None)
+        cu, cw = solution[0] / 2, solution[1] / 2
+        radius_sq = solution[2] + cu * cu + cw * cw
+        if radius_sq > 0:
+            found.append((low + 0.5 * station, cu, cw, np.sqrt(radius_sq), inside.sum()))
+    if not found:
+        return np.array([[0.0, 0.0], [0.0, 0.0], [np.median(u), np.median(w)]])
+    found = np.array(found)
+    typical = np.median(found[:, 3])
+    keep = (found[:, 3] > 0.5 * typical) & (found[:, 3] < 1.5 * typical)  # no tip cap or stray stations
+    found = found[keep] if keep.sum() >= 1 else found
+    degree = min(2, len(found) - 1)
+    coefficients = np.zeros((3, 2))
+    for column in (0, 1):
+        fit = np.polyfit(found[:, 0], found[:, 1 + column], degree, w=np.sqrt(found[:, 4]))
+        coefficients[3 - len(fit):, column] = fit
+    return coefficients
+
+
+def skin_chart(points: np.ndarray, frame: FingerFrame, tip_visible: bool = True) -> SkinChart:
+    """The chart of the surface sampled by ``points [N, 3]`` in ``frame`` (module docstring, steps 2-4);
+    ``tip_visible``: whether the fingertip is in view (a then counts from its pole, else from the cut end)."""
+    points = np.asarray(points, np.float64)
+    points = points[np.isfinite(points).all(1)]
+    if len(points) < MIN_POINTS:
+        raise InputError(f"the model has {len(points)} surface points: too few to unroll")
+    for _ in range(AXIS_ROUNDS + 1):
+        local = frame.local(points)
+        spread = np.percentile(np.hypot(local[:, 1] - np.median(local[:, 1]), local[:, 2] - np.median(local[:, 2])), 90)
+        centre = _centre_line(local, max(spread / 8.0, 1e-9))
+        middle = float(np.median(local[:, 0]))
+        slope = np.array([np.polyval(np.polyder(centre[:, c]), middle) for c in (0, 1)])
+        if np.hypot(*slope) < 1e-4:
+            break
+        frame = _turned(frame, slope)  # rings across the centre line, not across the first guess of the axis
+    cu, cw = (np.polyval(centre[:, c], local[:, 0]) for c in (0, 1))
+    radius = np.hypot(local[:, 1] - cu, local[:, 2] - cw)
+    azimuth = np.arctan2(local[:, 2] - cw, local[:, 1] - cu)
+    phi_step = np.radians(PHI_STEP_DEG)
+    step = max(float(np.median(radius)) * phi_step, 1e-9)
+    low = local[:, 0].min()
+    stations = int(np.floor((local[:, 0].max() - low) / step)) + 1
+    columns = int(round(2 * np.pi / phi_step))
+    row = np.clip(((local[:, 0] - low) / step).astype(int), 0, stations - 1)
+    col = np.clip(((azimuth + np.pi) / phi_step).astype(int), 0, columns - 1)
+    cell = row * columns + col
+    count = np.bincount(cell, minlength=stations * columns).reshape(stations, columns).astype(np.float64)
+    total = np.bincount(cell, radius, minlength=stations * columns).reshape(stations, columns)
+    smooth = dict(sigma=SMOOTHING_CELLS, mode=("nearest", "wrap"))
+    weight = ndimage.gaussian_filter(np.minimum(count, 1.0), **smooth)
+    mean = np.divide(total, np.maximum(count, 1e-12), out=np.zeros_like(total), where=count > 0)
+    rho = ndimage.gaussian_filter(mean * (count > 0), **smooth) / np.maximum(weight, 1e-12)
+    near = ndimage.binary_dilation(count > 0, structure=np.ones((3, 3), bool), iterations=1)
+    rho = np.where(near & (weight > 0.15), rho, np.nan)
+    x = low + (np.arange(stations) + 0.5) * step
+    phi = -np.pi + (np.arange(columns) + 0.5) * phi_step
+    cu_s, cw_s = (np.polyval(centre[:, c], x) for c in (0, 1))
+    local_nodes = np.stack([np.broadcast_to(x[:, None], rho.shape), cu_s[:, None] + rho * np.cos(phi)[None, :],
+                            cw_s[:, None] + rho * np.sin(phi)[None, :]], -1)
+    nodes = frame.world(local_nodes)
+    pole = None
+    if tip_visible:  # the tip: where the centre line leaves the surface's far end
+        end = float(local[:, 0].max())
+        pole = frame.world(np.array([end, np.polyval(centre[:, 0], end), np.polyval(centre[:, 1], end)]))
+    return SkinChart(frame, nodes, _normals(nodes, frame), *_arc_lengths(nodes, phi, pole), x, phi)
+
+
+def _derivative(nodes: np.ndarray, axis: int, wrap: bool) -> np.ndarray:
+    """Central difference of the node grid along ``axis``; one-sided where a neighbour is missing (the chart's rim)."""
+    if nodes.shape[axis] < 2:
+        return np.full_like(nodes, np.nan)
+    if wrap:
+        ahead, behind = np.roll(nodes, -1, axis) - nodes, nodes - np.roll(nodes, 1, axis)
+    else:
+        step = np.diff(nodes, axis=axis)
+        pad = np.full_like(np.take(nodes, [0], axis=axis), np.nan)
+        ahead, behind = np.concatenate([step, pad], axis), np.concatenate([pad, step], axis)
+    both = 0.5 * (ahead + behind)
+    return np.where(np.isfinite(both), both, np.where(np.isfinite(ahead), ahead, behind))
+
+
+def _normals(nodes: np.ndarray, frame: FingerFrame) -> np.ndarray:
+    """Unit outward normals of the node grid (NaN only where a node has no neighbour in some direction)."""
+    along = _derivative(nodes, 0, wrap=False) if nodes.shape[0] > 1 else np.broadcast_to(frame.axis, nodes.shape)
+    normal = np.cross(along, _derivative(nodes, 1, wrap=True))
+    radial = nodes - frame.origin
+    radial = radial - (radial @ frame.axis)[..., None] * frame.axis
+    normal = np.where(((normal * radial).sum(-1) < 0)[..., None], -normal, normal)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+def _arc_lengths(nodes: np.ndarray, phi: np.ndarray, pole: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, b)`` of every node (module docstring, step 4); NaN where the path from its origin is broken. ``pole``:
+    the tip's point on the surface when the tip is in view (a counts from it), else None (a counts from the cut end)."""
+    stations, columns = nodes.shape[:2]
+    ring = np.linalg.norm(np.diff(nodes, axis=1), axis=-1)  # [X, P-1]: node j to j+1
+    zero = int(np.argmin(np.abs(phi)))
+    b = np.full((stations, columns), np.nan)
+    b[:, zero] = 0.0
+    b[:, zero + 1:] = np.cumsum(ring[:, zero:], axis=1)  # NaN propagates past a gap
+    b[:, :zero] = -np.cumsum(ring[:, :zero][:, ::-1], axis=1)[:, ::-1]
+    b[~np.isfinite(nodes).all(-1)] = np.nan
+    # a: summed along each meridian from a reference station that most of them cross, where each starts at its own
+    # length up to the tip: its nodes' segments to its last node, then (tip in view) straight on to the pole.
+    meridian = np.linalg.norm(np.diff(nodes, axis=0), axis=-1)  # [X-1, P]: station i to i+1
+    finite = np.isfinite(nodes).all(-1)
+    a = np.full((stations, columns), np.nan)
+    if not finite.any():
+        return a, b
+    reference = int(np.argmax(finite.sum(1)))
+    start = np.full(columns, np.nan)
+    for j in np.flatnonzero(finite[reference]):
+        above = np.flatnonzero(finite[reference:, j])
+        top = reference + int(above[-1])
+        length = float(np.nansum(meridian[reference:top, j]))
+        start[j] = length + (float(np.linalg.norm(nodes[top, j] - pole)) if pole is not None else 0.0)
+    known = np.isfinite(start)
+    weight = ndimage.gaussian_filter1d(known.astype(float), 2.0, mode="wrap")
+    smooth = ndimage.gaussian_filter1d(np.where(known, start, 0.0), 2.0, mode="wrap") / np.maximum(weight, 1e-12)
+    a[reference] = np.where(known, smooth, np.nan)  # the ragged last nodes of the cap, evened out
+    a[reference + 1:] = a[reference] - np.cumsum(meridian[reference:], axis=0)  # toward the tip
+    a[:reference] = a[reference] + np.cumsum(meridian[:reference][::-1], axis=0)[::-1]  # toward the base
+    a[~np.isfinite(nodes).all(-1)] = np.nan
+    return a, b

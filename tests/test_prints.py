@@ -1,0 +1,222 @@
+"""`fs3d print`: the skin chart, the ridge filter, the rolled-equivalent print, its scoring and the command."""
+import csv
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from fingersplat3d.cli import main
+from fingersplat3d.errors import EXIT_INCOMPLETE, EXIT_INPUT, InputError
+from fingersplat3d.eval.fingerprint import nbis_available
+from fingersplat3d.eval.rolled_truth import fit_minutiae_similarity, located_minutiae
+from fingersplat3d.prints.enhance import gabor_enhance
+from fingersplat3d.prints.make import print_reconstruction
+from fingersplat3d.prints.skin_chart import finger_frame, skin_chart
+from fingersplat3d.scene import Camera, look_at
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "data_samples" / "uwa_seed1"
+
+
+def _ring_cameras(axis: np.ndarray, angles=(-45.0, 0.0, 45.0), distance=120.0, size=(640, 512)):
+    """Cameras on a ring about the x axis, looking at the origin from the pad's side (-z) and around."""
+    cameras = []
+    for degrees in angles:
+        turn = np.radians(degrees)
+        eye = np.array([0.0, np.sin(turn), -np.cos(turn)]) * distance
+        cameras.append(Camera.from_focal(2000.0, *size, look_at(eye, np.zeros(3), [1.0, 0.0, 0.0])))
+    return cameras
+
+
+def _silhouette_axes(cameras, axis):
+    """Each camera's image of the 3D axis line through the origin: origin pixel and unit direction toward +axis."""
+    found = []
+    for camera in cameras:
+        uv, _ = camera.project(np.array([[0.0, 0.0, 0.0], 5.0 * axis]))
+        direction = uv[1] - uv[0]
+        found.append((uv[0], direction / np.linalg.norm(direction)))
+    return found
+
+
+def _cylinder(radius=8.0, length=30.0, spread_deg=240.0, count=60000, seed=0):
+    """Points on a cylinder about +x (tip at x = length / 2), azimuth spread about the pad (-z)."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-length / 2, length / 2, count)
+    phi = np.radians(rng.uniform(-spread_deg / 2, spread_deg / 2, count))
+    return np.stack([x, radius * np.sin(phi), -radius * np.cos(phi)], 1)
+
+
+def test_the_axis_comes_from_the_silhouettes_and_points_to_the_tip():
+    axis = np.array([np.cos(0.1), np.sin(0.1), 0.0])
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    points = _cylinder()
+    frame = finger_frame(points, cameras, _silhouette_axes(cameras, axis))
+    assert frame.axis_from == "silhouettes"
+    assert np.degrees(np.arccos(np.clip(frame.axis @ axis, -1, 1))) < 0.5
+    flipped = finger_frame(points, cameras, [(o, -d) for o, d in _silhouette_axes(cameras, axis)])
+    assert flipped.axis @ axis < -0.99  # the tip is where the silhouettes say
+    assert abs(frame.pad @ frame.axis) < 1e-9 and np.allclose(np.cross(frame.axis, frame.pad), frame.side)
+    assert frame.pad @ np.array([0.0, 0.0, -1.0]) > 0.95  # toward the cameras: the pad
+
+
+def test_one_view_falls_back_to_the_points_longest_direction():
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]), angles=(0.0,))
+    frame = finger_frame(_cylinder(), cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0])))
+    assert frame.axis_from == "points" and frame.axis[0] > 0.99
+
+
+def test_the_chart_of_a_cylinder_is_its_arc_lengths():
+    radius = 8.0
+    points = _cylinder(radius)
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    frame = finger_frame(points, cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0])))
+    chart = skin_chart(points, frame, tip_visible=False)
+    valid = chart.valid
+    assert valid.sum() > 0.5 * valid.size * 240 / 360
+    nodes = chart.points[valid]
+    phi = np.arctan2(nodes[:, 1], -nodes[:, 2])  # from the pad (-z)
+    body = np.abs(phi) < np.radians(100)
+    # b: arc length around from the pad's centre line; a: from the cut end at x = 15 (no tip in view).
+    assert np.allclose(np.abs(chart.b[valid][body]), radius * np.abs(phi[body]), atol=0.05 * radius)
+    inner = body & (np.abs(nodes[:, 0]) < 12)
+    assert np.allclose(chart.a[valid][inner], 15.0 - nodes[inner, 0], atol=0.5)
+    assert np.all(np.isfinite(chart.normals[valid]))
+    radial = chart.points[valid] - frame.origin
+    radial -= (radial @ frame.axis)[:, None] * frame.axis
+    assert np.all((chart.normals[valid] * radial).sum(1) > 0)  # outward
+
+
+def test_too_few_points_make_no_chart():
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    with pytest.raises(InputError, match="too few"):
+        finger_frame(_cylinder(count=50), cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0])))
+
+
+def test_the_ridge_filter_removes_pores_and_keeps_ridges():
+    rng = np.random.default_rng(0)
+    period = 9.0
+    y, x = np.mgrid[0:200, 0:200].astype(np.float32)
+    ridges = np.cos(2 * np.pi * (x + 0.1 * y) / period).astype(np.float32)
+    noisy = ridges + (rng.random(ridges.shape) < 0.02).astype(np.float32) * -3.0 + rng.normal(0, 0.5, ridges.shape).astype(np.float32)
+    mask = np.zeros(ridges.shape, bool)
+    mask[20:180, 20:180] = True
+    out = gabor_enhance(noisy, mask, period)
+    inner = np.zeros_like(mask)
+    inner[40:160, 40:160] = True
+    corr = lambda a, b: np.corrcoef(a[inner], b[inner])[0, 1]  # noqa: E731
+    assert corr(out, ridges) > 0.95 > corr(noisy, ridges)
+    assert np.all(np.isfinite(out)) and np.all(out[~mask] == 0)
+    assert 0.7 < np.sqrt(np.mean(out[inner] ** 2)) < 1.3
+    assert np.all(np.isfinite(gabor_enhance(np.zeros((50, 50), np.float32), np.ones((50, 50), bool), period)))
+
+
+def test_the_similarity_fit_finds_a_turned_scaled_print_among_false_minutiae():
+    rng = np.random.default_rng(3)
+    true_xy = rng.uniform(50, 450, (70, 2))
+    true_deg = rng.uniform(0, 360, 70)
+    turn, scale, shift = np.radians(3.0), 1.03, np.array([25.0, -18.0])
+    rotation = scale * np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    found_xy = true_xy @ rotation.T + shift + rng.normal(0, 2.0, true_xy.shape)
+    found_deg = (true_deg + 3.0 + rng.normal(0, 5, 70)) % 360
+    keep = rng.random(70) < 0.85  # mindtct misses some, finds others that are not there
+    found_xy = np.vstack([found_xy[keep], rng.uniform(0, 520, (30, 2))])
+    found_deg = np.concatenate([found_deg[keep], rng.uniform(0, 360, 30)])
+    fitted = fit_minutiae_similarity(true_xy, true_deg, found_xy, found_deg, shift + np.array([30.0, 20.0]))
+    assert np.hypot(*fitted[:, 0]) == pytest.approx(scale, abs=0.01)
+    mask = np.ones((560, 560), bool)
+    score = located_minutiae(true_xy, true_deg, found_xy, found_deg, mask, shift + np.array([30.0, 20.0]))
+    assert score.inside == 70 and 0.75 < score.located_share <= keep.mean() + 0.05
+    assert abs(score.turn_deg - 3.0) < 0.5
+
+
+def test_the_rolled_print_of_a_true_model_is_a_500_ppi_print_of_its_skin():
+    result, scale_from, source = print_reconstruction(SAMPLE)
+    assert scale_from == "cameras (mm)"
+    assert result.image.dtype == np.uint8 and np.all(result.image[~result.mask] == 255)
+    assert result.mask.sum() > 50_000 and source.ndim == 2
+    period_mm = json.loads((SAMPLE / "minutiae.json").read_text())["ridge_period_mm"]
+    assert result.period_px == pytest.approx(period_mm * 500 / 25.4, rel=0.2)  # ~500 ppi
+    assert result.coverage_deg >= 150  # three views 45 degrees apart
+    points = result.points[result.mask]
+    assert np.all(np.isfinite(points)) and np.all(np.isnan(result.points[~result.mask]))
+    assert sum(result.view_share.values()) == pytest.approx(1.0)
+    # Neighbouring print pixels are neighbouring skin: 1 px at 500 ppi is 0.05 mm.
+    step = np.linalg.norm(np.diff(result.points, axis=1), axis=-1)
+    assert np.nanmedian(step) == pytest.approx(25.4 / 500, rel=0.15)
+
+
+@pytest.mark.skipif(not nbis_available(), reason="needs nbis-py (NIST mindtct)")
+def test_the_rolled_print_of_a_true_model_finds_the_true_minutiae():
+    from fingersplat3d.eval.contact import ContactImage
+    from fingersplat3d.eval.fingerprint import analyse
+    from fingersplat3d.eval.rolled_truth import template_shift
+
+    result, _, _ = print_reconstruction(SAMPLE)
+    found = analyse(ContactImage(result.image, np.array([[1.0, 0, 0], [0, 1.0, 0]]), 9.0, 1.0), nfiq2=False)
+    truth = json.loads((SAMPLE / "minutiae.json").read_text())["rolled_print"]
+    true_image = cv2.imread(str(SAMPLE / "rolled_print.png"), cv2.IMREAD_GRAYSCALE)
+    xy = np.array([m["xy"] for m in truth["minutiae"]])
+    degrees = np.array([m["angle_deg"] for m in truth["minutiae"]])
+    score = located_minutiae(xy, degrees, found.minutiae[:, :2], found.minutiae[:, 2], result.mask,
+                             template_shift(result.image, true_image))
+    assert score.inside > 40
+    assert score.located_share > 0.5  # 74 % measured on this 640x512 sample
+    assert score.scale == pytest.approx(1.0, abs=0.05)
+
+
+def _recon_without_depth(tmp_path: Path) -> Path:
+    folder = tmp_path / "nodepth"
+    folder.mkdir()
+    (folder / "cameras.json").write_text((SAMPLE / "cameras.json").read_text())
+    return folder
+
+
+def test_fs3d_print_writes_prints_and_lists_what_failed(tmp_path, capsys):
+    not_rec = tmp_path / "empty"
+    not_rec.mkdir()
+    blank = tmp_path / "blank.png"
+    cv2.imwrite(str(blank), np.full((200, 300), 128, np.uint8))
+    out = tmp_path / "prints"
+    inputs = [SAMPLE, SAMPLE / "images" / "center.png", not_rec, _recon_without_depth(tmp_path), blank, tmp_path / "missing.png"]
+    status = main(["print", *map(str, inputs), "-o", str(out), "--no-nfiq2"])
+    assert status == EXIT_INCOMPLETE
+    err = capsys.readouterr().err
+    assert "4 of 6 inputs gave no print" in err and "Traceback" not in err
+    rows = {row["name"]: row for row in csv.DictReader((out / "prints.csv").open())}
+    assert rows["uwa_seed1"]["status"] == "done" and rows["uwa_seed1"]["kind"] == "rolled"
+    assert float(rows["uwa_seed1"]["coverage_deg"]) >= 150
+    assert rows["center"]["status"] == "done" and rows["center"]["kind"] == "photo"
+    assert "not a reconstruction folder" in rows["empty"]["reason"]
+    assert "no depth maps" in rows["nodepth"]["reason"]
+    assert rows["blank"]["status"] == "failed" and rows["missing"]["status"] == "failed"
+    for name in ("uwa_seed1", "center"):
+        printed = cv2.imread(str(out / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+        assert printed.dtype == np.uint8 and printed.ndim == 2
+        assert (out / "masks" / f"{name}.png").is_file() and (out / "pictures" / f"{name}.png").is_file()
+    points = np.load(out / "points" / "uwa_seed1.npy")
+    assert points.shape == cv2.imread(str(out / "uwa_seed1.png")).shape[:2] + (3,) and points.dtype == np.float32
+    # An existing output folder is refused (nothing written), unless --overwrite.
+    assert main(["print", str(SAMPLE), "-o", str(out)]) == EXIT_INPUT
+    assert "already exists" in capsys.readouterr().err
+    assert main(["print", str(SAMPLE / "images" / "left.png"), "-o", str(out), "--overwrite", "--no-nfiq2"]) == 0
+    assert [row["name"] for row in csv.DictReader((out / "prints.csv").open())] == ["left"]
+
+
+def test_fs3d_print_refuses_bad_arguments(tmp_path, capsys):
+    assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--ppi", "0"]) == EXIT_INPUT
+    assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--px-per-mm", "nan"]) == EXIT_INPUT
+    assert not (tmp_path / "o").exists()
+
+
+def test_ridge_coherence_tells_ridges_from_noise():
+    from fingersplat3d.prints.enhance import ridge_coherence
+
+    rng = np.random.default_rng(1)
+    y, x = np.mgrid[0:160, 0:320].astype(np.float32)
+    image = np.cos(2 * np.pi * (x + 0.2 * y) / 9.0).astype(np.float32)
+    image[:, 160:] = rng.normal(0, 1, (160, 160))
+    coherence = ridge_coherence(image, np.ones(image.shape, bool), 9.0)
+    assert np.median(coherence[40:120, 20:120]) > 0.8 > 0.3 > np.median(coherence[40:120, 200:300])
+    assert np.all(np.isfinite(ridge_coherence(np.zeros((40, 40), np.float32), np.ones((40, 40), bool), 9.0)))
