@@ -118,3 +118,34 @@ def test_real_captures_make_prints_nfiq2_scores_and_a_table(real_dev, tmp_path):
     rows = list(csv.DictReader(open(out / "scores.csv")))
     assert sum(r["genuine"] == "1" for r in rows) == 2 and sum(r["genuine"] == "0" for r in rows) == 4
     assert "| real | 2 | 4 |" in (out / "summary.md").read_text()
+
+
+def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
+    """Two shipped synthetic fingers: their front photos and the rolled prints of their true models, against their
+    true rolled prints as a contact gallery (named by finger)."""
+    import shutil
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "data_samples"
+    probes, gallery, out = tmp_path / "probes", tmp_path / "gallery", tmp_path / "out"
+    probes.mkdir()
+    gallery.mkdir()
+    for finger, sample in (("7_1", "uwa_seed0"), ("8_1", "uwa_seed1")):
+        shutil.copy(root / sample / "images" / "center.png", probes / f"{finger}_1_1_0.png")
+        shutil.copy(root / sample / "rolled_print.png", gallery / f"{finger}.png")
+    status = main(["eval", "match", str(probes), "--gallery", str(gallery), "--rolled", str(root / "uwa_seed0"),
+                   "-o", str(out)])
+    assert status == 2 and "naming pattern" in capsys.readouterr().err  # a capture folder's photos are not UWA-named
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "-o", str(out)]) == 0
+    rows = list(csv.DictReader((out / "scores.csv").open()))
+    gallery_rows = [r for r in rows if r["protocol"] == "photos vs gallery"]
+    assert len(gallery_rows) == 4 and sum(int(r["genuine"]) for r in gallery_rows) == 2
+    genuine = [int(r["score"]) for r in gallery_rows if r["genuine"] == "1"]
+    impostor = [int(r["score"]) for r in gallery_rows if r["genuine"] == "0"]
+    assert min(genuine) > max(impostor)  # the photos' prints match their own fingers' rolled prints
+    assert "photos vs gallery" in (out / "summary.md").read_text()
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--mirror", "-o", str(out), "--overwrite"]) == 0
+    mirrored = [r for r in csv.DictReader((out / "scores.csv").open()) if r["protocol"] == "photos vs gallery"]
+    assert max(int(r["score"]) for r in mirrored if r["genuine"] == "1") < min(genuine)  # handedness matters
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--gallery-naming", "(?P<who>.+)",
+                 "-o", str(tmp_path / "o2")]) == 2

@@ -220,3 +220,12 @@ def test_ridge_coherence_tells_ridges_from_noise():
     coherence = ridge_coherence(image, np.ones(image.shape, bool), 9.0)
     assert np.median(coherence[40:120, 20:120]) > 0.8 > 0.3 > np.median(coherence[40:120, 200:300])
     assert np.all(np.isfinite(ridge_coherence(np.zeros((40, 40), np.float32), np.ones((40, 40), bool), 9.0)))
+
+
+def test_fs3d_print_mirror_flips_the_print(tmp_path):
+    photo = SAMPLE / "images" / "center.png"
+    assert main(["print", str(photo), "-o", str(tmp_path / "a"), "--no-nfiq2"]) == 0
+    assert main(["print", str(photo), "-o", str(tmp_path / "b"), "--no-nfiq2", "--mirror"]) == 0
+    plain = cv2.imread(str(tmp_path / "a" / "center.png"), cv2.IMREAD_GRAYSCALE)
+    mirrored = cv2.imread(str(tmp_path / "b" / "center.png"), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(plain[:, ::-1], mirrored)

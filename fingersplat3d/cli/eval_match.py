@@ -14,7 +14,7 @@ __all__ = ["add", "run"]
 
 
 def add(actions) -> None:
-    from ..experiments.match import DEFAULT_ANGLES, UWA_NAMING
+    from ..experiments.match import DEFAULT_ANGLES, GALLERY_NAMING, UWA_NAMING
 
     match = actions.add_parser(
         "match", help="mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET",
@@ -23,7 +23,8 @@ def add(actions) -> None:
                     "camera with bozorth3: genuine when the finger is the same (read from the file names), impostor "
                     "otherwise. With --reconstructions, each model is rendered at --angles about its rig axis and "
                     "compared with the real photos of the finger's other captures (and of other fingers). With --rolled, the "
-                    "rolled-equivalent print of each model is compared with the other models' and with the photos. Writes "
+                    "rolled-equivalent print of each model is compared with the other models' and with the photos. With "
+                    "--gallery, every photo, render and rolled print is also compared with the contact prints given. Writes "
                     "scores.csv, prints.csv, prints/, summary.md (EER, FNMR at FMR 1 % and 0.01 %, FMR_zero, "
                     "scores by angle) and det.png.")
     match.add_argument("inputs", nargs="+", type=Path, help="photos, or folders of photos")
@@ -32,6 +33,15 @@ def add(actions) -> None:
     match.add_argument("--rolled", nargs="+", type=Path, default=[], metavar="REC",
                        help="reconstruction folders from 'fs3d fuse' whose rolled-equivalent prints (fs3d print) are "
                             "compared with each other and with the photos of the other captures")
+    match.add_argument("--gallery", nargs="+", type=Path, default=[], metavar="PRINT",
+                       help="contact prints (files or folders; 8-bit gray, ridges dark, ~500 ppi, used as they are) that "
+                            "every photo, render and rolled print is compared with: contactless against contact")
+    match.add_argument("--gallery-naming", default=GALLERY_NAMING,
+                       help="regular expression on the gallery's file stems with the named group 'finger', matching the "
+                            "probes' finger (default: the whole stem, e.g. 1_1.png for UWA's 1_1_*)")
+    match.add_argument("--mirror", action="store_true",
+                       help="mirror the probes left-right before comparing them with the gallery (an inked or scanned "
+                            "print is the mirror image of a photo of the pad)")
     match.add_argument("--naming", default=UWA_NAMING,
                        help="regular expression on file stems with named groups 'capture' and 'finger' (or "
                             "'subject' and 'hand'), optional 'view' and 'session'; default: the UWA 3D/2D naming "
@@ -48,7 +58,7 @@ def add(actions) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments.match import parse_samples, run_match_evaluation
+    from ..experiments.match import parse_samples, read_gallery, run_match_evaluation
     from ..io.images import find_files
 
     nbis_needed("fs3d eval match")
@@ -57,15 +67,17 @@ def run(args: argparse.Namespace) -> int:
     samples, unparsed = parse_samples(find_files(args.inputs), args.naming, views)
     for path in unparsed:
         print(f"fs3d eval match: {path.name} does not follow the naming pattern; skipped", file=sys.stderr)
-    if len({s.capture for s in samples}) < 2:
+    gallery = read_gallery(args.gallery, args.gallery_naming) if args.gallery else []
+    if not samples or (len({s.capture for s in samples}) < 2 and not gallery):
         raise InputError(f"{len(samples)} photos from {len({s.capture for s in samples})} capture(s): matching needs "
-                         "photos of at least two captures, named so that the finger and capture can be read")
+                         "photos of at least two captures (or of one, with --gallery), named so that the finger and capture can be read")
     for folder in [*args.reconstructions, *args.rolled]:
         if not (folder / "cameras.json").is_file():
             raise InputError(f"{folder}: not a reconstruction folder (no cameras.json; make one with 'fs3d fuse')")
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
-                                       naming=args.naming, ridges=args.ridges, rolled=args.rolled)
+                                       naming=args.naming, ridges=args.ridges, rolled=args.rolled,
+                                       gallery=gallery, mirror=args.mirror)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

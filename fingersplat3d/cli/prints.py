@@ -28,6 +28,9 @@ def add(commands) -> None:
     prints.add_argument("--ppi", type=number(float, 100.0, 2000.0), default=500.0, help="print resolution (default 500)")
     prints.add_argument("--ridges", choices=("bright", "dark"), default="bright",
                         help="how ridge crests look in the photos: bright (contactless rigs, the default) or dark")
+    prints.add_argument("--mirror", action="store_true",
+                        help="mirror the prints left-right, as an inked or scanned contact print is of a photo of the pad "
+                             "(default: a photo's handedness, as fs3d synth's true rolled prints)")
     prints.add_argument("--no-nfiq2", action="store_true", help="skip NFIQ2 and the minutiae count")
     prints.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     prints.set_defaults(run=run)
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         pairs = list(zip(args.inputs, _names(args.inputs)))
         for source, name in tqdm(pairs, desc="fs3d print", unit="print", disable=None):
             rows.append(make_print(source, name, folder, px_per_mm=args.px_per_mm, ppi=args.ppi, ridges=args.ridges,
-                                   nfiq2=not args.no_nfiq2))
+                                   nfiq2=not args.no_nfiq2, mirror=args.mirror))
         write_rows(folder / "prints.csv", COLUMNS, rows)
     failed = [row for row in rows if row["status"] != "done"]
     for row in rows:

@@ -17,6 +17,12 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
   models (genuine for the same finger), and, as **rolled vs photos**, against the real photos of the
   gallery view of every other capture.
 
+* **gallery** (with ``gallery`` contact prints, used as they are, each named by its finger with
+  ``gallery_naming``): every probe print — photos, renders, rolled prints — against every gallery
+  print, genuine for the same finger; one protocol per probe kind (``photos vs gallery``, ...).
+  ``mirror``: the probes are mirrored left-right first (an inked or scanned contact print is the
+  mirror image of a photo of the pad; a rolled print of ``fs3d synth`` or IMPOSE is not).
+
 Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`) and goes
 through NIST's tools (:mod:`fingersplat3d.eval.fingerprint`). Error rates:
 :func:`fingersplat3d.eval.verification.error_rates`. Writes ``scores.csv``, ``prints.csv`` (per
@@ -34,11 +40,14 @@ import numpy as np
 from ..errors import FS3DError, InputError
 from .tables import write_rows
 
-__all__ = ["UWA_NAMING", "Sample", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
+__all__ = ["UWA_NAMING", "GALLERY_NAMING", "Sample", "read_gallery", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
 
 UWA_NAMING = r"^(?P<subject>\d+)_(?P<hand>\d+)_(?P<capture>\d+)_(?P<session>\d+)_(?P<view>\d+)$"
 """UWA 3D/2D: finger = subject + finger number, capture = capture + session, view = frame."""
 DEFAULT_ANGLES = (-30.0, -15.0, 0.0, 15.0, 30.0)
+GALLERY_NAMING = r"^(?P<finger>.+)$"
+"""A contact print's file stem is its finger, as the probes' naming reads it (e.g. ``1_1.png`` for UWA's ``1_1_*``)."""
+PROBE_KINDS = {"real": "photos", "synthesized": "renders", "rolled": "rolled prints"}
 
 
 @dataclass(frozen=True)
@@ -182,9 +191,58 @@ def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str):
     return finger, capture, gallery_view, _Print(name, fingerprint, fingerprint.failure)
 
 
+def read_gallery(paths: list[Path], naming: str = GALLERY_NAMING) -> list[tuple[str, Path]]:
+    """``(finger, file)`` of every contact print under ``paths``; a name the pattern does not read is an error."""
+    from ..io.images import find_files
+
+    try:
+        pattern = re.compile(naming)
+    except re.error as error:
+        raise InputError(f"--gallery-naming {naming!r} is not a regular expression: {error}") from None
+    if "finger" not in pattern.groupindex:
+        raise InputError(f"--gallery-naming {naming!r} needs the named group 'finger'")
+    gallery = []
+    for path in find_files(paths):
+        match = pattern.match(path.stem)
+        if match is None:
+            raise InputError(f"{path.name}: the gallery naming {naming!r} does not read a finger from it")
+        gallery.append((match.group("finger"), path))
+    if not gallery:
+        raise InputError("the gallery holds no image files")
+    return gallery
+
+
+def _gallery_print(finger: str, path: Path):
+    """A contact print as it is (8-bit gray, ridges dark, ~500 ppi): ``(finger, _Print)``."""
+    from ..eval.contact import ContactImage
+    from ..eval.fingerprint import analyse
+    from ..io.images import read_image
+
+    try:
+        gray = read_image(path, gray=True)
+    except FS3DError as error:
+        return finger, _Print(f"gallery/{path.stem}", None, str(error))
+    image = np.rint(np.clip(gray, 0, 1) * 255).astype(np.uint8)
+    fingerprint = analyse(ContactImage(image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0), nfiq2=False)
+    return finger, _Print(f"gallery/{path.stem}", fingerprint if fingerprint.count else None, fingerprint.failure or
+                          ("" if fingerprint.count else "mindtct found no minutiae"))
+
+
+def _mirrored(name: str, folder: Path):
+    """The print saved as ``name`` in ``folder``, mirrored left-right and analysed again (None when it is not there)."""
+    from ..eval.contact import ContactImage
+    from ..eval.fingerprint import analyse
+
+    image = cv2.imread(str(folder / f"{name.replace('/', '__')}.png"), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        return None
+    return analyse(ContactImage(image[:, ::-1].copy(), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0), nfiq2=False)
+
+
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
-                         progress: bool = True, rolled: list[Path] = ()) -> dict:
+                         progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
+                         mirror: bool = False) -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary."""
     from tqdm import tqdm
 
@@ -234,7 +292,22 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                 rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
                              "genuine": int(sample.finger == finger_a), "angle_deg": "",
                              "score": match_score(print_a.fingerprint, real[k].fingerprint)})
-    all_prints = real + [p for *_, renders in synthesized for _, p in renders] + [p for *_, p in unrolled]
+    contact = [_gallery_print(finger, path) for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print",
+                                                                      disable=not progress)]
+    probes = ([("real", sample.finger, p) for sample, p in zip(samples, real)]
+              + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
+              + [("rolled", finger, p) for finger, _, _, p in unrolled])
+    for kind, finger, probe in probes if contact else ():
+        template = _mirrored(probe.name, prints) if mirror and probe.fingerprint is not None else probe.fingerprint
+        if template is None:
+            continue
+        for gallery_finger, entry in contact:
+            if entry.fingerprint is not None:
+                rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name, "gallery": entry.name,
+                             "genuine": int(gallery_finger == finger), "angle_deg": "",
+                             "score": match_score(template, entry.fingerprint)})
+    all_prints = (real + [p for *_, renders in synthesized for _, p in renders] + [p for *_, p in unrolled]
+                  + [p for _, p in contact])
     write_rows(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
@@ -266,7 +339,7 @@ def summarise(rows: list[dict], prints: list[_Print]) -> dict:
     from ..eval.verification import error_rates
 
     protocols = {}
-    for protocol in ("real", "synthesized", "rolled", "rolled vs photos"):
+    for protocol in ("real", "synthesized", "rolled", "rolled vs photos", *(f"{kind} vs gallery" for kind in PROBE_KINDS.values())):
         genuine, impostor = _split(rows, protocol)
         if genuine and impostor:
             protocols[protocol] = error_rates(genuine, impostor)

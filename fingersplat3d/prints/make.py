@@ -149,8 +149,9 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
 
 
 def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
-               ridges: str = "bright", nfiq2: bool = True) -> dict:
-    """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason)."""
+               ridges: str = "bright", nfiq2: bool = True, mirror: bool = False) -> dict:
+    """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason).
+    ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad."""
     from ..io.images import write_image
 
     started = time.perf_counter()
@@ -161,8 +162,9 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
             image, mask, centre_x = result.image, result.mask, result.origin_px[0]
             per_mm = ppi / 25.4
             row.update(kind="rolled", ppi=ppi, scale_from=scale_from, coverage_deg=round(result.coverage_deg, 1))
+            points = result.points[:, ::-1] if mirror else result.points
             (out / "points").mkdir(exist_ok=True)
-            np.save(out / "points" / f"{name}.npy", result.points)
+            np.save(out / "points" / f"{name}.npy", np.ascontiguousarray(points))
         elif source.is_file():
             contact, photo = print_photo(source, ridges=ridges)
             image, mask, centre_x = contact.image, contact.image < 255, None
@@ -174,6 +176,9 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
         row.update(status="failed", reason=str(error).splitlines()[0] if str(error) else type(error).__name__,
                    seconds=round(time.perf_counter() - started, 2))
         return row
+    if mirror:
+        image, mask = np.ascontiguousarray(image[:, ::-1]), np.ascontiguousarray(mask[:, ::-1])
+        centre_x = None if centre_x is None else image.shape[1] - 1 - centre_x
     for folder in ("masks", "pictures"):
         (out / folder).mkdir(exist_ok=True)
     write_image(out / f"{name}.png", image.astype(np.float32) / 255.0)
