@@ -1,0 +1,92 @@
+"""Silhouette contours as correspondences: a view's surface must reach another view's outline where it sees it.
+
+A camera's silhouette edge is where its rays graze the finger. The skin there faces sideways, and a
+second view turned toward that side sees it (the front camera's outline is skin a 45-degree side camera
+sees squarely). So, per station along view b's silhouette axis and per side of it, the point of view
+a's surface that projects furthest toward that side of b must land *on* b's edge: no further (it would
+stand outside b's silhouette), no nearer (b's outline would then be skin nobody placed there).
+
+That is the one thing the photos say about the skin only one view sees beyond another's outline: without
+it, the surface there is the prior's guess, and on synthetic fingers it fell away too early (side views'
+unshared skin 0.74-0.85 mm too deep, their surfaces 5-7 px short of the front view's outline).
+
+Each such pair becomes a correspondence the global alignment already knows how to use: a's pixel (its
+outermost point at the station, chosen afresh from the current model every round) against b's edge
+point, weighted only across the edge (information ``n n^T``: the along-edge offset is free) and only
+in the a -> b direction (b's own depth at its rim means nothing). A side counts when a faces b's rim
+there by more than :data:`MIN_FACING` and b's edge is its silhouette's (not the image border's).
+Pure numpy.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...scene import Camera
+from ...segment.silhouette import silhouette_frame
+
+__all__ = ["contour_correspondences", "MIN_FACING", "STATION_STEP_PX"]
+
+MIN_FACING = 0.35  # cosine between a's line of sight and the skin's normal at b's rim (~70 degrees)
+STATION_STEP_PX = 6.0  # one contour correspondence per this many pixels along b's axis, per side
+REACH_PERIODS = 4.0  # a's outermost point counts when it projects within this many ridge periods of b's edge
+_END_SHARE = 0.15  # stations this share of the silhouette's length from either end are left out (tip cap, cut end)
+_BORDER_PX = 3  # an edge this close to the image border is the frame's, not the finger's
+
+
+def _camera(alignment, view: int, shape: tuple[int, int]) -> Camera:
+    return Camera.from_focal(alignment.focals[view], shape[1], shape[0], alignment.world_to_cam[view])
+
+
+def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, stride: int = 2):
+    """``(uv_a [K, 2], uv_b [K, 2], information_b [K, 2, 2])`` of the contour correspondences of view ``a``'s
+    surface against view ``b``'s outline (module docstring); empty arrays when there are none."""
+    empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    depth_a, mask_b = alignment.depths[a], np.asarray(masks[b], bool)
+    if mask_b.sum() < 64 or not np.isfinite(depth_a).any():
+        return empty
+    camera_a, camera_b = _camera(alignment, a, depth_a.shape), _camera(alignment, b, mask_b.shape)
+    frame = silhouette_frame(mask_b)
+    rows, cols = np.nonzero(np.isfinite(depth_a))
+    keep = (rows % stride == 0) & (cols % stride == 0)
+    uv_a = np.stack([cols[keep], rows[keep]], 1).astype(np.float64)
+    points = camera_a.unproject(uv_a, depth_a[rows[keep], cols[keep]])
+    uv_in_b, z = camera_b.project(points)
+    ok = np.isfinite(uv_in_b).all(1) & (z > 0)
+    uv_a, points, uv_in_b = uv_a[ok], points[ok], uv_in_b[ok]
+    s, t = frame.coordinates(uv_in_b)
+    start = frame.sections.start
+    length = frame.sections.half_width.size
+    stations = start + np.arange(_END_SHARE * length, (1 - _END_SHARE) * length, STATION_STEP_PX)
+    height, width = mask_b.shape
+    found_a, found_b, information = [], [], []
+    rotation_b = camera_b.rotation
+    for station in stations:
+        near = np.abs(s - station) <= 0.5 * STATION_STEP_PX
+        if not near.any():
+            continue
+        half, centre = frame.sections.at(np.array([station]))
+        for side in (-1.0, 1.0):
+            edge = frame.origin + station * frame.axis + (centre[0] + side * half[0]) * frame.normal
+            if not (_BORDER_PX <= edge[0] <= width - 1 - _BORDER_PX and _BORDER_PX <= edge[1] <= height - 1 - _BORDER_PX):
+                continue
+            across = side * (t[near] - centre[0])
+            best = int(np.argmax(across))
+            if side * (t[near][best] - centre[0]) < half[0] - REACH_PERIODS * period_px:
+                continue  # a's surface does not come near this side of b's outline
+            normal_image = side * frame.normal
+            normal_world = rotation_b.T @ np.array([normal_image[0], normal_image[1], 0.0])
+            point = points[near][best]
+            sight = camera_a.center - point
+            if normal_world @ sight / max(np.linalg.norm(sight), 1e-12) < MIN_FACING:
+                continue  # a does not see the skin at b's rim on this side
+            at = s[near][best]
+            half_at, centre_at = frame.sections.at(np.array([at]))
+            # One pixel inside the outermost mask pixel: where b's own pointmap still has depth (the correspondence
+            # needs it; the residual is a -> b only), at most a pixel short of the true outline.
+            station_point = frame.origin + at * frame.axis + (centre_at[0] + side * (half_at[0] - 1.0)) * frame.normal
+            found_a.append(uv_a[near][best])
+            found_b.append(station_point)
+            information.append(np.outer(normal_image, normal_image))
+    if not found_a:
+        return empty
+    return np.array(found_a), np.array(found_b), np.array(information)

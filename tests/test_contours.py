@@ -1,0 +1,81 @@
+"""Silhouette contours as correspondences: on the true model they sit on the outline, on the side a view sees."""
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from fingersplat3d.align.correspond.contours import contour_correspondences
+from fingersplat3d.io.capture import read_capture
+from fingersplat3d.segment.silhouette import silhouette_frame
+
+SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed0"
+
+
+def _truth():
+    capture = read_capture(SAMPLE)
+    views = [capture[name] for name in ("left", "center", "right")]
+    alignment = SimpleNamespace(depths=[v.depth for v in views], focals=[float(v.camera.K[0, 0]) for v in views],
+                                world_to_cam=[v.camera.world_to_cam for v in views])
+    return views, alignment
+
+
+def _across_error(views, a, b, uv_a, uv_b, information):
+    camera_a, camera_b = views[a].camera, views[b].camera
+    depth = views[a].depth[np.rint(uv_a[:, 1]).astype(int), np.rint(uv_a[:, 0]).astype(int)]
+    projected, _ = camera_b.project(camera_a.unproject(uv_a, depth))
+    normal = np.array([np.linalg.eigh(i)[1][:, -1] for i in information])
+    return np.abs(np.einsum("ni,ni->n", projected - uv_b, normal))
+
+
+def test_on_the_true_model_a_side_view_reaches_the_front_outline_on_its_own_side_only():
+    views, alignment = _truth()
+    masks = [v.mask for v in views]
+    uv_a, uv_b, information = contour_correspondences(alignment, masks, 0, 1, period_px=8.0)
+    assert len(uv_a) >= 10
+    assert np.median(_across_error(views, 0, 1, uv_a, uv_b, information)) < 2.0  # the outline, less its 1-px inset
+    frame = silhouette_frame(masks[1])
+    _, t = frame.coordinates(uv_b)
+    sides = np.sign(t - np.median(frame.sections.centre))
+    assert abs(sides.sum()) == len(sides)  # one side: the left camera does not see the front camera's far rim
+    # The two side cameras see opposite rims of the front view.
+    other, _, _ = contour_correspondences(alignment, masks, 2, 1, period_px=8.0)
+    _, t_other = frame.coordinates(contour_correspondences(alignment, masks, 2, 1, period_px=8.0)[1])
+    assert len(other) >= 10 and np.sign(np.median(t_other - np.median(frame.sections.centre))) == -sides[0]
+    assert np.allclose(np.trace(information, axis1=1, axis2=2), 1.0)  # unit weight across the edge, none along it
+
+
+def test_a_relief_too_deep_or_too_flat_is_told_by_the_outline():
+    views, alignment = _truth()
+    masks = [v.mask for v in views]
+    depth = views[0].depth
+    median = np.nanmedian(depth)
+
+    def error(relief):
+        changed = SimpleNamespace(**{**vars(alignment), "depths": [median + relief * (depth - median)] + alignment.depths[1:]})
+        uv_a, uv_b, information = contour_correspondences(changed, masks, 0, 1, period_px=8.0)
+        return np.median(_across_error([views[0].with_(depth=changed.depths[0])] + views[1:], 0, 1, uv_a, uv_b, information))
+
+    true = error(1.0)
+    assert error(1.6) > 3 * true and error(0.7) > 2 * true  # measured: 1.0 px, 4.0 px, 2.9 px
+
+
+def test_no_surface_or_no_outline_gives_none():
+    views, alignment = _truth()
+    masks = [v.mask for v in views]
+    empty = SimpleNamespace(**{**vars(alignment), "depths": [np.full_like(alignment.depths[0], np.nan)] + alignment.depths[1:]})
+    assert len(contour_correspondences(empty, masks, 0, 1, period_px=8.0)[0]) == 0
+    assert len(contour_correspondences(alignment, [masks[0], np.zeros_like(masks[1]), masks[2]], 0, 1, period_px=8.0)[0]) == 0
+
+
+def test_the_registration_adds_contours_from_three_views_only():
+    from fingersplat3d.align.register import CONTOUR_MIN_VIEWS, RegistrationConfig, _contours
+
+    views, alignment = _truth()
+    prepared = SimpleNamespace(masks=[v.mask for v in views], period=8.0)
+    three = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, True]), prepared, RegistrationConfig())
+    assert CONTOUR_MIN_VIEWS == 3 and len(three) >= 4  # each side camera against the front outline, and back
+    assert all(np.all(pair.information_a == 0) for pair in three)  # one way: a -> b
+    two = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, False]), prepared, RegistrationConfig())
+    off = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, True]), prepared,
+                    RegistrationConfig(contour_weight=0.0))
+    assert two == [] and off == []
