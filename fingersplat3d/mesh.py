@@ -148,8 +148,10 @@ def mesh_from_cloud(cloud: "o3d.geometry.PointCloud", *, depth: int = 8, density
         raise ValueError("the point cloud contains NaN or Inf coordinates")
     cloud = _with_normals(cloud)
 
+    # One thread: Open3D's multi-threaded Poisson solver crashes now and then (SIGSEGV) when the CPU is saturated
+    # (isl-org/Open3D#6828, #7229); it took down a CI test worker here. On a finger-sized cloud one thread costs little.
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        mesh, densities = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(cloud, depth=int(depth))
+        mesh, densities = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(cloud, depth=int(depth), n_threads=1)
     densities = np.asarray(densities)
     unsupported = np.zeros(len(densities), bool)
     if density_quantile > 0 and len(densities):
