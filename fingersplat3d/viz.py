@@ -7,10 +7,28 @@ import numpy as np
 from .io.depth import depth_colormap
 from .scene import Capture
 
-__all__ = ["contact_sheet", "draw_minutiae"]
+__all__ = ["contact_sheet", "draw_minutiae", "gray8", "side_by_side"]
 
 _ENDING = (230, 60, 40)
 _BIFURCATION = (40, 120, 240)
+
+
+def gray8(image: np.ndarray) -> np.ndarray:
+    """A [0, 1] image (gray, or colour averaged) as 8-bit gray."""
+    gray = image if image.ndim == 2 else image.mean(2)
+    return (np.clip(gray, 0, 1) * 255).astype(np.uint8)
+
+
+def side_by_side(parts: list[np.ndarray], height: int, gap: int = 8, interpolation: int | None = None) -> np.ndarray:
+    """8-bit gray ``parts`` scaled to ``height`` and set in a row, ``gap`` white pixels apart. ``interpolation``:
+    OpenCV's flag for every part; None: area averaging to shrink, bilinear to enlarge."""
+    tiles = []
+    for part in parts:
+        scale = height / part.shape[0]
+        flag = interpolation if interpolation is not None else (cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+        tiles.append(cv2.resize(part, (max(1, int(round(part.shape[1] * scale))), height), interpolation=flag))
+        tiles.append(np.full((height, gap), 255, np.uint8))
+    return np.hstack(tiles[:-1])
 
 
 def _to_rgb8(image: np.ndarray) -> np.ndarray:

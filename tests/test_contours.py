@@ -68,10 +68,10 @@ def test_no_surface_or_no_outline_gives_none():
 
 
 def test_the_registration_adds_contours_from_three_views_only():
-    from fingersplat3d.align.register import CONTOUR_MIN_VIEWS, RegistrationConfig, _contours
+    from fingersplat3d.align.register import CONTOUR_MIN_VIEWS, RegistrationConfig, _contours, _Prepared
 
     views, alignment = _truth()
-    prepared = SimpleNamespace(masks=[v.mask for v in views], period=8.0)
+    prepared = _Prepared(textures=[], masks=[v.mask for v in views], grays=[], period=8.0)
     three = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, True]), prepared, RegistrationConfig())
     assert CONTOUR_MIN_VIEWS == 3 and len(three) >= 4  # each side camera against the front outline, and back
     assert all(np.all(pair.information_a == 0) for pair in three)  # one way: a -> b

@@ -12,10 +12,13 @@ same finger). Prints the summary table.
 from __future__ import annotations
 
 import argparse
+import csv
 import shutil
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 FRAMES = {"center": 0, "left": 1, "right": 2}
 
@@ -55,10 +58,6 @@ def main() -> int:
         samples, _ = parse_samples(sorted(probes.glob("*.png")), views={"0"})
         out = Path(scratch) / "match"
         summary = run_match_evaluation(samples, out, rolled=reconstructions, gallery=read_gallery([gallery]))
-        import csv
-
-        import numpy as np
-
         scores = list(csv.DictReader((out / "scores.csv").open()))
         spread = []
         for protocol in ("photos vs gallery", "rolled prints vs gallery"):

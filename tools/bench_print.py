@@ -41,7 +41,6 @@ def main() -> int:
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x"))
-    identity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     info = machine()
     rows, truths, prints = [], {}, {}
     with tempfile.TemporaryDirectory() as scratch:
@@ -60,10 +59,10 @@ def main() -> int:
             started = time.perf_counter()
             result, scale_from, _ = print_reconstruction(reconstruction)
             seconds = time.perf_counter() - started
-            found = analyse(ContactImage(result.image, identity, result.period_px, 1.0), nfiq2=False)
-            quality = analyse(ContactImage(nfiq2_region(result.image, result.origin_px[0]), identity, 9.0, 1.0)).nfiq2
+            found = analyse(ContactImage.of_print(result.image, result.period_px), nfiq2=False)
+            quality = analyse(ContactImage.of_print(nfiq2_region(result.image, result.origin_px[0]), 9.0)).nfiq2
             rolled = synth.rolled
-            truth = analyse(ContactImage(rolled.image, identity, 9.0, 1.0), nfiq2=False)
+            truth = analyse(ContactImage.of_print(rolled.image, 9.0), nfiq2=False)
             true_xy = np.array([m["xy"] for m in rolled.minutiae]).reshape(-1, 2)
             true_deg = np.array([m["angle_deg"] for m in rolled.minutiae])
             half_width_px = rolled.image.shape[1] / 2.0

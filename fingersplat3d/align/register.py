@@ -25,13 +25,14 @@ registered pair reaches stay unaligned (the caller decides what that means). Pur
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Sequence
 
 import numpy as np
 
 from ..pointmaps.base import Pointmap
 from ..scene import View
-from ..segment.silhouette import TIP_BASES, orient_frames
+from ..segment.silhouette import TIP_BASES, orient_frames, silhouette_frame
 from .correspond.chart import CylinderChart
 from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
 from .correspond.contours import contour_correspondences
@@ -115,6 +116,12 @@ class _Prepared:
     grays: list[np.ndarray]
     period: float
 
+    @cached_property
+    def outlines(self) -> list:
+        """Each mask's :func:`~fingersplat3d.segment.silhouette.silhouette_frame`, made once (the contours of every
+        guided round and view pair read them)."""
+        return [silhouette_frame(mask) for mask in self.masks]
+
 
 def _prepare(views: Sequence[View]) -> _Prepared:
     grays = [as_gray(view.image, f"view {view.name!r}") for view in views]
@@ -166,7 +173,8 @@ def _contours(alignment, prepared: _Prepared, config: RegistrationConfig) -> lis
         for b in placed:
             if a == b:
                 continue
-            uv_a, uv_b, information = contour_correspondences(alignment, prepared.masks, a, b, prepared.period)
+            uv_a, uv_b, information = contour_correspondences(alignment, prepared.masks, a, b, prepared.period,
+                                                              outline=prepared.outlines[b])
             if len(uv_a):
                 found.append(PairCorrespondences(a, b, uv_a, uv_b, np.full(len(uv_a), config.contour_weight), np.eye(4),
                                                  np.zeros_like(information), information))

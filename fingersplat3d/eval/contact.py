@@ -48,6 +48,11 @@ class ContactImage:
     period_px: float  # the photo's ridge period
     ppi_scale: float  # print pixels per photo pixel
 
+    @classmethod
+    def of_print(cls, image: np.ndarray, period_px: float = 0.0) -> "ContactImage":
+        """An image that already is a print (a rolled print, a contact gallery's): the identity map, scale 1."""
+        return cls(image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), float(period_px), 1.0)
+
     def to_print(self, xy: np.ndarray) -> np.ndarray:
         """Photo pixels ``[N, 2]`` -> print pixels."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)

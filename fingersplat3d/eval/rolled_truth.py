@@ -68,7 +68,9 @@ def _angle_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _umeyama(source: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """``[2, 3]`` similarity (no reflection) taking ``source`` points to ``target`` in least squares."""
+    """``[2, 3]`` similarity (no reflection) taking ``source`` points to ``target`` in least squares. Written here in 2D:
+    :func:`fingersplat3d.align.solve.procrustes.umeyama` is 3D, and on points in a plane its proper 3D rotation can be
+    a mirror of that plane turned over."""
     mu_s, mu_t = source.mean(0), target.mean(0)
     s, t = source - mu_s, target - mu_t
     u, sigma, vt = np.linalg.svd(t.T @ s / len(source))

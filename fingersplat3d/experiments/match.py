@@ -31,7 +31,7 @@ print: minutiae, NFIQ2, failure), ``prints/`` (the prints as PNG), ``summary.md`
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -120,6 +120,7 @@ class _Print:
     name: str
     fingerprint: object | None  # Fingerprint, None when no print could be made
     failure: str
+    image: np.ndarray | None = field(default=None, repr=False, compare=False)  # the print (uint8), when one was made
 
 
 def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str) -> _Print:
@@ -128,7 +129,7 @@ def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Pat
     contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name)
     if contact is not None:
         cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), contact.image)
-    return _Print(name, fingerprint, failure)
+    return _Print(name, fingerprint, failure, None if contact is None else contact.image)
 
 
 def _reconstruction_identity(folder: Path, pattern: re.Pattern):
@@ -187,8 +188,8 @@ def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str):
     except FS3DError as error:
         return finger, capture, gallery_view, _Print(name, None, str(error))
     cv2.imwrite(str(prints / f"{name}.png"), result.image)
-    fingerprint = analyse(ContactImage(result.image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), result.period_px, 1.0))
-    return finger, capture, gallery_view, _Print(name, fingerprint, fingerprint.failure)
+    fingerprint = analyse(ContactImage.of_print(result.image, result.period_px))
+    return finger, capture, gallery_view, _Print(name, fingerprint, fingerprint.failure, result.image)
 
 
 def read_gallery(paths: list[Path], naming: str = GALLERY_NAMING) -> list[tuple[str, Path]]:
@@ -223,20 +224,19 @@ def _gallery_print(finger: str, path: Path):
     except FS3DError as error:
         return finger, _Print(f"gallery/{path.stem}", None, str(error))
     image = np.rint(np.clip(gray, 0, 1) * 255).astype(np.uint8)
-    fingerprint = analyse(ContactImage(image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0), nfiq2=False)
+    fingerprint = analyse(ContactImage.of_print(image), nfiq2=False)
     return finger, _Print(f"gallery/{path.stem}", fingerprint if fingerprint.count else None, fingerprint.failure or
                           ("" if fingerprint.count else "mindtct found no minutiae"))
 
 
-def _mirrored(name: str, folder: Path):
-    """The print saved as ``name`` in ``folder``, mirrored left-right and analysed again (None when it is not there)."""
+def _mirrored(probe: _Print):
+    """The probe's print mirrored left-right and analysed again (None when it has no print)."""
     from ..eval.contact import ContactImage
     from ..eval.fingerprint import analyse
 
-    image = cv2.imread(str(folder / f"{name.replace('/', '__')}.png"), cv2.IMREAD_GRAYSCALE)
-    if image is None:
+    if probe.image is None:
         return None
-    return analyse(ContactImage(image[:, ::-1].copy(), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0), nfiq2=False)
+    return analyse(ContactImage.of_print(probe.image[:, ::-1].copy()), nfiq2=False)
 
 
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
@@ -298,7 +298,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
               + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
               + [("rolled", finger, p) for finger, _, _, p in unrolled])
     for kind, finger, probe in probes if contact else ():
-        template = _mirrored(probe.name, prints) if mirror and probe.fingerprint is not None else probe.fingerprint
+        template = _mirrored(probe) if mirror and probe.fingerprint is not None else probe.fingerprint
         if template is None:
             continue
         for gallery_finger, entry in contact:

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from ..errors import FS3DError
+from ..viz import gray8, side_by_side
 from .tables import write_rows
 
 __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
@@ -34,20 +35,6 @@ PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
 """The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
 COLUMNS = ("capture", "view", "status", "reason", "train_views", "psnr_placed", "ssim_placed", "psnr", "ssim",
            "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
-
-
-def _gray8(image: np.ndarray) -> np.ndarray:
-    gray = image if image.ndim == 2 else image.mean(2)
-    return (np.clip(gray, 0, 1) * 255).astype(np.uint8)
-
-
-def _tile(parts: list[np.ndarray], height: int = 360) -> np.ndarray:
-    tiles = []
-    for part in parts:
-        scale = height / part.shape[0]
-        tiles.append(cv2.resize(part, (max(1, int(round(part.shape[1] * scale))), height), interpolation=cv2.INTER_AREA))
-        tiles.append(np.full((height, 8), 255, np.uint8))
-    return np.hstack(tiles[:-1])
 
 
 def _nfiq2(image: np.ndarray, mask: np.ndarray, period_px: float | None = None):
@@ -99,7 +86,7 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
         row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train),
                    psnr_placed=scores_before.psnr, ssim_placed=scores_before.ssim, psnr=scores.psnr, ssim=scores.ssim,
                    fit_s=stage.report["fit_seconds"])
-        parts = [_gray8(view.image), _gray8(after.image)]
+        parts = [gray8(view.image), gray8(after.image)]
         if nfiq2:
             real, real_failure, real_print, period = _nfiq2(view.image, view.mask)
             # the render is of the same view at the same scale: its print is made at the photo's ridge period
@@ -108,7 +95,7 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
                        nfiq2_failure="; ".join(f"{who}: {why}" for who, why in (("real", real_failure),
                                                                                ("render", render_failure)) if why))
             parts += [p for p in (real_print, render_print) if p is not None]
-        cv2.imwrite(str(out / "views" / f"{name}__{view.name}.png"), _tile(parts))
+        cv2.imwrite(str(out / "views" / f"{name}__{view.name}.png"), side_by_side(parts, 360, 8, cv2.INTER_AREA))
         rows.append(row)
     return rows
 

@@ -21,6 +21,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..align.correspond.texture import masked_blur
+
 __all__ = ["gabor_enhance", "ridge_coherence", "ORIENTATIONS", "SIGMA_ACROSS", "SIGMA_ALONG", "ORIENTATION_PERIODS"]
 
 ORIENTATIONS = 16
@@ -29,8 +31,11 @@ SIGMA_ALONG = 0.9  # periods: longer along the ridges, over a pore or a break
 ORIENTATION_PERIODS = 1.5  # smoothing of the structure tensor, periods
 
 
-def _masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
-    return cv2.GaussianBlur(values * weight, (0, 0), sigma) / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigma), 1e-3)
+def _structure_tensor(texture: np.ndarray, weight: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(gxx, gyy, gxy)``: the texture's gradient products (Sobel), averaged over ``sigma`` pixels inside ``weight``."""
+    gx = cv2.Sobel(texture, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(texture, cv2.CV_32F, 0, 1, ksize=3)
+    return tuple(masked_blur(v, weight, sigma) for v in (gx * gx, gy * gy, gx * gy))
 
 
 def _kernel(angle: float, period: float) -> np.ndarray:
@@ -50,10 +55,7 @@ def gabor_enhance(texture: np.ndarray, mask: np.ndarray, period: float) -> np.nd
     texture = np.asarray(texture, np.float32)
     weight = np.asarray(mask, np.float32)
     period = float(max(period, 3.0))
-    gx = cv2.Sobel(texture, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(texture, cv2.CV_32F, 0, 1, ksize=3)
-    sigma = ORIENTATION_PERIODS * period
-    gxx, gyy, gxy = (_masked_blur(v, weight, sigma) for v in (gx * gx, gy * gy, gx * gy))
+    gxx, gyy, gxy = _structure_tensor(texture, weight, ORIENTATION_PERIODS * period)
     ridge_angle = (0.5 * np.arctan2(2 * gxy, gxx - gyy) + 0.5 * np.pi) % np.pi  # gradients run across the ridges
     position = ridge_angle / np.pi * ORIENTATIONS
     low = np.floor(position).astype(int) % ORIENTATIONS
@@ -63,7 +65,7 @@ def gabor_enhance(texture: np.ndarray, mask: np.ndarray, period: float) -> np.nd
         filtered = cv2.filter2D(texture * weight, -1, _kernel(k * np.pi / ORIENTATIONS, period), borderType=cv2.BORDER_CONSTANT)
         response += np.where(low == k, 1.0 - share, 0.0) * filtered
         response += np.where((low + 1) % ORIENTATIONS == k, share, 0.0) * filtered
-    rms = np.sqrt(_masked_blur(response * response, weight, period) + 1e-12)
+    rms = np.sqrt(masked_blur(response * response, weight, period) + 1e-12)
     return np.where(weight > 0, response / rms, 0.0).astype(np.float32)
 
 
@@ -73,9 +75,6 @@ def ridge_coherence(texture: np.ndarray, mask: np.ndarray, period: float, period
     misregistered patterns; cores and deltas are low too, over about a period)."""
     texture = np.asarray(texture, np.float32)
     weight = np.asarray(mask, np.float32)
-    gx = cv2.Sobel(texture, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(texture, cv2.CV_32F, 0, 1, ksize=3)
-    sigma = periods * max(float(period), 3.0)
-    gxx, gyy, gxy = (_masked_blur(v, weight, sigma) for v in (gx * gx, gy * gy, gx * gy))
+    gxx, gyy, gxy = _structure_tensor(texture, weight, periods * max(float(period), 3.0))
     coherence = np.sqrt((gxx - gyy) ** 2 + 4 * gxy * gxy) / np.maximum(gxx + gyy, 1e-12)
     return np.where(weight > 0, np.clip(coherence, 0.0, 1.0), 0.0).astype(np.float32)

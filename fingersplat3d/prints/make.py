@@ -21,7 +21,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from ..errors import FS3DError, InputError
@@ -104,17 +103,6 @@ def print_photo(path: Path, *, ridges: str = "bright") -> tuple[ContactImage, np
     return contact_like(gray, finger_mask(gray, name=path.name), ridges=ridges), gray
 
 
-def _picture(source: np.ndarray, printed: np.ndarray) -> np.ndarray:
-    """The source photo (gray, [0, 1]) beside the print (uint8), both ``PICTURE_HEIGHT`` tall."""
-    tiles = []
-    for part in ((np.clip(source, 0, 1) * 255).astype(np.uint8), printed):
-        scale = PICTURE_HEIGHT / part.shape[0]
-        size = (max(1, int(round(part.shape[1] * scale))), PICTURE_HEIGHT)
-        tiles.append(cv2.resize(part, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR))
-        tiles.append(np.full((PICTURE_HEIGHT, 12), 255, np.uint8))
-    return np.hstack(tiles[:-1])
-
-
 def nfiq2_region(image: np.ndarray, centre_x: float | None = None) -> np.ndarray:
     """The part of a print NFIQ2 can score (at most 799 x 999 px of skin, white margins): a rolled print wider than
     that keeps the middle around ``centre_x`` (the pad's centre line; default the skin's middle), a longer one its tip."""
@@ -143,7 +131,7 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
     if not nfiq2 or not nbis_available():
         return {}
     region = nfiq2_region(image, centre_x)
-    found = analyse(ContactImage(region, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.0, 1.0))
+    found = analyse(ContactImage.of_print(region))
     note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if region.shape != image.shape else "")
     return {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
 
@@ -153,6 +141,7 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
     """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason).
     ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad."""
     from ..io.images import write_image
+    from ..viz import gray8, side_by_side
 
     started = time.perf_counter()
     row = {"name": name, "source": str(source)}
@@ -183,7 +172,8 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
         (out / folder).mkdir(exist_ok=True)
     write_image(out / f"{name}.png", image.astype(np.float32) / 255.0)
     write_image(out / "masks" / f"{name}.png", mask.astype(np.float32))
-    write_image(out / "pictures" / f"{name}.png", _picture(photo, image).astype(np.float32) / 255.0)
+    picture = side_by_side([gray8(photo), image], PICTURE_HEIGHT, gap=12)  # the source beside its print
+    write_image(out / "pictures" / f"{name}.png", picture.astype(np.float32) / 255.0)
     scores = _scores(image, nfiq2, centre_x)
     row.update(status="done", reason="", width_px=image.shape[1], height_px=image.shape[0],
                area_mm2=round(float(mask.sum()) / per_mm ** 2, 1), **scores, seconds=round(time.perf_counter() - started, 2))

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...scene import Camera
-from ...segment.silhouette import silhouette_frame
+from ...segment.silhouette import SilhouetteFrame, silhouette_frame
 
 __all__ = ["contour_correspondences", "MIN_FACING", "STATION_STEP_PX"]
 
@@ -37,15 +37,17 @@ def _camera(alignment, view: int, shape: tuple[int, int]) -> Camera:
     return Camera.from_focal(alignment.focals[view], shape[1], shape[0], alignment.world_to_cam[view])
 
 
-def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, stride: int = 2):
+def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, stride: int = 2,
+                            outline: SilhouetteFrame | None = None):
     """``(uv_a [K, 2], uv_b [K, 2], information_b [K, 2, 2])`` of the contour correspondences of view ``a``'s
-    surface against view ``b``'s outline (module docstring); empty arrays when there are none."""
+    surface against view ``b``'s outline (module docstring); empty arrays when there are none. ``outline``:
+    :func:`~fingersplat3d.segment.silhouette.silhouette_frame` of ``masks[b]``, when the caller holds it."""
     empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2)))
     depth_a, mask_b = alignment.depths[a], np.asarray(masks[b], bool)
     if mask_b.sum() < 64 or not np.isfinite(depth_a).any():
         return empty
     camera_a, camera_b = _camera(alignment, a, depth_a.shape), _camera(alignment, b, mask_b.shape)
-    frame = silhouette_frame(mask_b)
+    frame = silhouette_frame(mask_b) if outline is None else outline
     rows, cols = np.nonzero(np.isfinite(depth_a))
     keep = (rows % stride == 0) & (cols % stride == 0)
     uv_a = np.stack([cols[keep], rows[keep]], 1).astype(np.float64)
@@ -61,30 +63,28 @@ def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, 
     found_a, found_b, information = [], [], []
     rotation_b = camera_b.rotation
     for station in stations:
-        near = np.abs(s - station) <= 0.5 * STATION_STEP_PX
-        if not near.any():
+        near = np.flatnonzero(np.abs(s - station) <= 0.5 * STATION_STEP_PX)
+        if not near.size:
             continue
         half, centre = frame.sections.at(np.array([station]))
         for side in (-1.0, 1.0):
             edge = frame.origin + station * frame.axis + (centre[0] + side * half[0]) * frame.normal
             if not (_BORDER_PX <= edge[0] <= width - 1 - _BORDER_PX and _BORDER_PX <= edge[1] <= height - 1 - _BORDER_PX):
                 continue
-            across = side * (t[near] - centre[0])
-            best = int(np.argmax(across))
-            if side * (t[near][best] - centre[0]) < half[0] - REACH_PERIODS * period_px:
+            best = near[int(np.argmax(side * (t[near] - centre[0])))]
+            if side * (t[best] - centre[0]) < half[0] - REACH_PERIODS * period_px:
                 continue  # a's surface does not come near this side of b's outline
             normal_image = side * frame.normal
             normal_world = rotation_b.T @ np.array([normal_image[0], normal_image[1], 0.0])
-            point = points[near][best]
-            sight = camera_a.center - point
+            sight = camera_a.center - points[best]
             if normal_world @ sight / max(np.linalg.norm(sight), 1e-12) < MIN_FACING:
                 continue  # a does not see the skin at b's rim on this side
-            at = s[near][best]
+            at = s[best]
             half_at, centre_at = frame.sections.at(np.array([at]))
             # One pixel inside the outermost mask pixel: where b's own pointmap still has depth (the correspondence
             # needs it; the residual is a -> b only), at most a pixel short of the true outline.
             station_point = frame.origin + at * frame.axis + (centre_at[0] + side * (half_at[0] - 1.0)) * frame.normal
-            found_a.append(uv_a[near][best])
+            found_a.append(uv_a[best])
             found_b.append(station_point)
             information.append(np.outer(normal_image, normal_image))
     if not found_a:

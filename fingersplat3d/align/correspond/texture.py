@@ -19,7 +19,8 @@ import numpy as np
 
 from ...errors import InputError
 
-__all__ = ["as_gray", "estimate_ridge_period", "ridge_area", "suppress_glints", "ridge_texture", "DEFAULT_PERIOD_PX"]
+__all__ = ["as_gray", "estimate_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture",
+           "DEFAULT_PERIOD_PX"]
 
 DEFAULT_PERIOD_PX = 8.0
 """Period returned when no ridge peak stands out (a featureless image)."""
@@ -168,15 +169,17 @@ def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor:
     return np.where(glint, opened, gray)
 
 
+def masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian blur of ``values`` over ``weight`` (a mask as float), normalised by the blurred weight: the mean of
+    what lies inside, so the outside does not darken the rim."""
+    return cv2.GaussianBlur(values * weight, (0, 0), sigma) / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigma), 1e-3)
+
+
 def ridge_texture(gray: np.ndarray, mask: np.ndarray, period: float) -> np.ndarray:
     """Band-passed ridge texture ``[H, W]`` float32 with unit local RMS inside ``mask``, 0 outside."""
     gray = as_gray(gray)
     weight = np.asarray(mask, np.float32)
     clean = suppress_glints(gray, np.asarray(mask, bool), radius=max(1, int(round(period / 12)))) * weight
-
-    def inside_blur(values: np.ndarray, sigma: float) -> np.ndarray:
-        return cv2.GaussianBlur(values * weight, (0, 0), sigma) / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigma), 1e-3)
-
-    band = (inside_blur(clean, 0.18 * period) - inside_blur(clean, 0.6 * period)) * weight
-    rms = np.sqrt(inside_blur(band * band, period) + RMS_FLOOR ** 2)
+    band = (masked_blur(clean, weight, 0.18 * period) - masked_blur(clean, weight, 0.6 * period)) * weight
+    rms = np.sqrt(masked_blur(band * band, weight, period) + RMS_FLOOR ** 2)
     return (band / rms * weight).astype(np.float32)
