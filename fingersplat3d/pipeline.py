@@ -11,7 +11,7 @@ import resource
 import sys
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -28,6 +28,7 @@ from .errors import InputError
 from .scene import Camera, Capture, View
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
+from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, map_on_grid, working_views
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
 
@@ -62,6 +63,10 @@ class FuseConfig:
     """Pointmap confidence below which pixels are left out of the fused cloud."""
     voxel: float = 0.002
     """Voxel of the fused cloud, as a fraction of its extent (0 = keep every point)."""
+    ridge_px: float | None = RIDGE_PX
+    """Working pixels per ridge period: photos that sample the ridges more finely are scaled down for the geometry
+    and the splat fit, and the outputs put back on the photos' grid (:mod:`fingersplat3d.working_scale`); None: the
+    photos' own resolution."""
     px_per_mm: float | None = None
     """Metric hint: image pixels per millimetre at the finger (first view)."""
     finger_width_mm: float | None = None
@@ -116,16 +121,40 @@ def _warn(report: dict, message: str) -> None:
     print(f"fs3d fuse: warning: {message}", file=sys.stderr)
 
 
-def _with_masks(capture: Capture) -> Capture:
-    from .segment.masks import finger_mask
+def _at_working_scale(capture: Capture, ridge_px: float | None, factor: float | None = None
+                      ) -> tuple[Capture, Capture, WorkingScale]:
+    """(the photos with their masks, the same at the working resolution, the scale between them)."""
+    photo, working, scale = working_views(capture.views, ridge_px, factor)
+    return Capture(tuple(photo), capture.metadata), Capture(tuple(working), capture.metadata), scale
 
-    views = []
-    for view in capture.views:
-        mask = view.mask if view.mask is not None else finger_mask(view.image, name=f"view {view.name!r}")
-        if mask.sum() < 16:
-            raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
-        views.append(view.with_(mask=mask))
-    return Capture(tuple(views), capture.metadata)
+
+def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
+    """``config`` with the alignment's robust scale made the working resolution's: the same share of a ridge period
+    as at the resolution it was tuned at (:data:`~fingersplat3d.working_scale.TUNED_PX_PER_RIDGE`), so that the fit
+    weighs its matches against its priors alike at any resolution. Photos used as they are keep it."""
+    if scale.factor == 1.0:
+        return config
+    align = config.registration.global_align
+    per_ridge = scale.period_px / TUNED_PX_PER_RIDGE if np.isfinite(scale.period_px) else 1.0  # else a photo pixel
+    robust = align.robust_px * scale.factor * per_ridge
+    return replace(config, registration=replace(config.registration, global_align=replace(align, robust_px=robust)))
+
+
+def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], maps: Sequence[list[np.ndarray] | None],
+                   report: dict) -> tuple[list[Camera], list]:
+    """Cameras and per-view maps of the working resolution put back on the photos' pixel grid."""
+    report["working_resolution"] = scale.as_report([(view.width, view.height) for view in photos.views])
+    if scale.factor == 1.0:
+        return cameras, list(maps)
+    sizes = [(view.width, view.height) for view in photos.views]
+    grow = [size[0] / camera.width for camera, size in zip(cameras, sizes)]
+    cameras = [camera.resized(size) for camera, size in zip(cameras, sizes)]
+    out = [None if views is None else [map_on_grid(values, size, view.mask)
+                                       for values, size, view in zip(views, sizes, photos.views)] for views in maps]
+    alignment = report.get("alignment", {})
+    if alignment.get("focals_px") is not None:
+        alignment["focals_px"] = [float(f) * g for f, g in zip(alignment["focals_px"], grow)]
+    return cameras, out
 
 
 def _backend(config: FuseConfig):
@@ -207,21 +236,28 @@ def _check_rig(capture: Capture, rig: Rig) -> None:
             raise InputError(f"view {view.name!r}: {error}") from None
 
 
-def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Rig | None = None) -> RigCapture:
+def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Rig | None = None,
+                     factor: float | None = None) -> RigCapture:
     """A capture up to its registration (masks, pointmaps, correspondences, its own alignment): what a
     rig calibration (:func:`~fingersplat3d.align.solve.rig.calibrate_rig`) pools. With ``rig``, the
-    guided matching runs through that rig's model (a calibration's re-matching round)."""
+    guided matching runs through that rig's model (a calibration's re-matching round).
+
+    ``factor``: the working resolution to use (every capture of a calibration must share one: the focal lengths
+    it pools are in working pixels); None measures it. The result's sizes are the photos' own, its focal
+    lengths, depths and correspondences the working resolution's."""
     config = FuseConfig() if config is None else config
     if rig is not None:
         _check_rig(capture, rig)
-    capture = _with_masks(capture)
+    photos, capture, scale = _at_working_scale(capture, config.ridge_px, factor)
+    rig = None if rig is None else rig.scaled(scale.factor)
+    config = _in_working_pixels(config, scale)
     pairs = _distinct_pairs(capture)
     pointmaps, _ = _pointmaps(capture, pairs, config, {})
     registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig)
     seed = capture.metadata.get("seed")
     name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
-                      registration.alignment, [(view.width, view.height) for view in capture.views], tuple(capture.names))
+                      registration.alignment, [(view.width, view.height) for view in photos.views], tuple(capture.names))
 
 
 def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: GlobalAlignment, report: dict) -> dict:
@@ -329,11 +365,12 @@ def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.n
     return points_to_cloud(points, view.image[valid])
 
 
-def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict) -> float | None:
-    """Millimetres per reconstruction unit from a metric hint, or None."""
+def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict,
+                  factor: float = 1.0) -> float | None:
+    """Millimetres per reconstruction unit from a metric hint, or None (``factor``: working pixels per photo pixel)."""
     if config.px_per_mm:
         depth = float(np.nanmedian(depths[0]))
-        return cameras[0].K[0, 0] / (config.px_per_mm * depth)
+        return cameras[0].K[0, 0] / (config.px_per_mm * factor * depth)
     if config.finger_width_mm:
         points = np.asarray(cloud.points)
         centred = points - points.mean(0)
@@ -373,7 +410,9 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
     try:
         with step("masks"):
-            capture = _with_masks(capture)
+            photos, capture, scale = _at_working_scale(capture, config.ridge_px)
+            rig = None if rig is None else rig.scaled(scale.factor)
+            config = _in_working_pixels(config, scale)
         bar.update()
         pairs = _distinct_pairs(capture)
         with step("pointmaps"):
@@ -397,12 +436,12 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         bar.update()
         with step("fusion"):
             cloud = _fused_cloud(clouds, cameras, aligned, config.voxel)
-            scale = _metric_scale(config, cameras, depths, cloud, report)
-            units = "mm" if scale is not None else "arbitrary"
-            if scale is not None:
-                cloud.scale(scale, center=np.zeros(3))
-                depths = [d * scale for d in depths]
-                cameras = [_scaled_camera(c, scale) for c in cameras]
+            mm_per_unit = _metric_scale(config, cameras, depths, cloud, report, scale.factor)
+            units = "mm" if mm_per_unit is not None else "arbitrary"
+            if mm_per_unit is not None:
+                cloud.scale(mm_per_unit, center=np.zeros(3))
+                depths = [d * mm_per_unit for d in depths]
+                cameras = [_scaled_camera(c, mm_per_unit) for c in cameras]
         bar.update()
         splat = None
         if config.splat is not None:
@@ -434,9 +473,11 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d, focals_px=alignment.focals,
         relief_scale=alignment.relief_scale, spanning_tree=[[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
         aligned=dict(zip(capture.names, alignment.aligned)))
-    report.update(stages=stages.records, units=units, scale_mm_per_unit=scale, points=len(cloud.points))
-    return Reconstruction(capture, cameras, depths, confidences, cloud, units, scale, report, mesh,
-                          splat.gaussians if splat else None, splat.depths if splat else None)
+    cameras, (depths, confidences, splat_depths) = _on_photo_grid(
+        photos, scale, cameras, (depths, confidences, splat.depths if splat else None), report)
+    report.update(stages=stages.records, units=units, scale_mm_per_unit=mm_per_unit, points=len(cloud.points))
+    return Reconstruction(photos, cameras, depths, confidences, cloud, units, mm_per_unit, report, mesh,
+                          splat.gaussians if splat else None, splat_depths)
 
 
 def _orient_outward(cloud, cameras: list[Camera], views: list[int]) -> None:

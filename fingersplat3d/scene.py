@@ -18,7 +18,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Camera", "View", "Capture", "look_at"]
+__all__ = ["Camera", "View", "Capture", "look_at", "scaled_size"]
 
 
 def _as_matrix(value: Any, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -130,14 +130,19 @@ class Camera:
 
     def scaled(self, factor: float) -> "Camera":
         """The same camera for an image resized by ``factor`` (pixel centres stay consistent)."""
-        width, height = max(1, round(self.width * factor)), max(1, round(self.height * factor))
-        sx, sy = width / self.width, height / self.height
-        K = self.K.copy()
-        K[0] *= sx
-        K[1] *= sy
-        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5
-        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5
-        return Camera(K, self.world_to_cam, width, height)
+        return self.resized(scaled_size(self.size, factor))
+
+    def resized(self, size: tuple[int, int]) -> "Camera":
+        """The same camera (same pose) for its image resampled to ``size`` = (width, height): pixel centres at
+        integer coordinates, so a pixel ``x`` of the new grid is ``(x + 0.5) * W / w - 0.5`` of the old one."""
+        sx, sy = size[0] / self.width, size[1] / self.height
+        onto = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+        return Camera(onto @ self.K, self.world_to_cam, int(size[0]), int(size[1]))
+
+
+def scaled_size(size: tuple[int, int], factor: float) -> tuple[int, int]:
+    """An image's ``(width, height)`` scaled by ``factor`` and rounded (never below one pixel)."""
+    return max(1, round(size[0] * factor)), max(1, round(size[1] * factor))
 
 
 def look_at(eye: Sequence[float], target: Sequence[float], up: Sequence[float]) -> np.ndarray:

@@ -26,7 +26,7 @@ LAYERS = [
     {"splat"},
     {"synth"},
     {"io", "mesh", "viz"},
-    {"pipeline", "prints"},
+    {"pipeline", "prints", "working_scale"},
     {"batch", "experiments"},
     {"cli"},
 ]

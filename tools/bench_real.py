@@ -1,6 +1,6 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
-    python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--json out.json]
+    python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
@@ -16,14 +16,14 @@ from pathlib import Path
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
 
 
-def _measure(job, guided_rounds: int) -> dict:
+def _measure(job, guided_rounds: int, ridge_px: float) -> dict:
     from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.experiments.real import measure_real
     from fingersplat3d.io.jobs import load_job
     from fingersplat3d.pipeline import FuseConfig
 
     capture = load_job(job)
-    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds))
+    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None)
     return measure_real(capture, config, leave_one_out=True) | {"capture": job.name}
 
 
@@ -32,11 +32,14 @@ def main() -> int:
     from fingersplat3d.experiments.process import in_fresh_process
     from fingersplat3d.experiments.real import real_table, summarize_real
     from fingersplat3d.io.jobs import list_jobs
+    from fingersplat3d.working_scale import RIDGE_PX
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of UWA raw frames")
     parser.add_argument("--select", help="a subset, as fs3d batch takes it: subject=S,finger=F,capture=C,count=K")
     parser.add_argument("--guided-rounds", type=int, default=2)
+    parser.add_argument("--ridge-px", type=float, default=RIDGE_PX,
+                        help=f"working pixels per ridge period (default {RIDGE_PX:g}; 0: the photos' own resolution)")
     parser.add_argument("--json", type=Path, help="write every figure here")
     args = parser.parse_args()
     if not args.data.is_dir():
@@ -45,7 +48,7 @@ def main() -> int:
         return 2
     records = []
     for job in list_jobs([args.data], args.select):
-        records.append(in_fresh_process(_measure, job, args.guided_rounds))
+        records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px))
         r = records[-1]
         print(f"{job.name}: {r['registered']}/3 registered, angles {', '.join(f'{v:.1f}' for v in r['angles_deg'].values())}, "
               f"focal {r['focal']:.0f}, {r['seconds']:.1f} s", file=sys.stderr, flush=True)
@@ -53,7 +56,7 @@ def main() -> int:
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores, load {info['load'][0]:.2f}; torch {info['torch']}, "
           f"open3d {info['open3d']}; {len(records)} captures of {args.data.name}, geometry only, "
-          f"{args.guided_rounds} guided rounds.\n")
+          f"{args.guided_rounds} guided rounds, {args.ridge_px:g} px per ridge (0: photo resolution).\n")
     print(real_table(records, summary))
     print(f"\nFocal spread {100 * summary['focal_spread']:.0f} %; rig deviation over all pairs: median "
           f"{summary['rig_deviation_median_deg']:.2f}°, max {summary['rig_deviation_max_deg']:.2f}°.")

@@ -10,7 +10,7 @@ from ..align.register import RegistrationConfig
 from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
-from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, splat_config
+from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, ridge_px, splat_config
 from .types import COUNT, POSITIVE, STEPS
 
 __all__ = ["add", "run"]
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
-                        splat=splat_config(args))
+                        splat=splat_config(args), ridge_px=ridge_px(args))
     rig = read_rig(args.rig)
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True, rig=rig)

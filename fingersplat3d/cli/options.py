@@ -7,9 +7,10 @@ from pathlib import Path
 from ..align.register import MATCHERS, RegistrationConfig
 from ..align.solve.photometric import PhotometricConfig
 from ..splat.config import DEFAULT_PRESET, PRESETS, preset
-from .types import COUNT, POSITIVE, STEPS
+from ..working_scale import RIDGE_PX
+from .types import COUNT, POSITIVE, STEPS, number
 
-__all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "read_rig"]
+__all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "ridge_px", "read_rig"]
 
 
 def add_registration_arguments(parser) -> None:
@@ -23,6 +24,10 @@ def add_registration_arguments(parser) -> None:
                              "view sees (~2 s; brings the views' ridges into phase, for texturing and prints; it does not "
                              "move the turns, and on synthetic fingers it does not make the depth better: docs/fuse.md)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+    parser.add_argument("--ridge-px", type=number(float, 0.0, 1000.0), default=RIDGE_PX,
+                        help=f"working pixels per ridge period (default {RIDGE_PX:g}): photos that sample the ridges more "
+                             "finely (large camera photos) are scaled down for the geometry and the fit, and the outputs "
+                             "put back on the photos' grid; 0 keeps the photos' own resolution")
 
 
 def photometric_config(args: argparse.Namespace) -> PhotometricConfig:
@@ -68,7 +73,12 @@ def fuse_config(args: argparse.Namespace):
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
                                       photometric=photometric_config(args))
     return FuseConfig(registration=registration, splat=splat_config(args) if hasattr(args, "no_splat") else None,
-                      mesh=getattr(args, "mesh", False))
+                      mesh=getattr(args, "mesh", False), ridge_px=ridge_px(args))
+
+
+def ridge_px(args: argparse.Namespace) -> float | None:
+    """``--ridge-px`` as the fuse settings take it (0: None, the photos' own resolution)."""
+    return args.ridge_px or None
 
 
 def read_rig(path: Path | None):

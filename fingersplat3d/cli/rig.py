@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from ..align.solve.global_opt import GlobalAlignConfig
@@ -53,9 +54,15 @@ def run(args: argparse.Namespace) -> int:
         else:
             captures.append(capture)
 
+    # One working resolution for every capture: the focal lengths the calibration pools are in its pixels.
+    factor = _shared_factor(jobs, config.ridge_px)
+
     def register(selected, rig=None, desc="fs3d rig calibrate"):
-        return ray_map(register_job, selected, (config, args.threads_per_task, rig), on_result, address=args.address,
-                       cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
+        return ray_map(register_job, selected, (config, args.threads_per_task, rig, factor), on_result,
+                       address=args.address, cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
+
+    def in_photo_pixels(calibration):  # the rig file's focal is the photos' (any later fuse scales it its own way)
+        return replace(calibration, rig=replace(calibration.rig, focal=calibration.rig.focal / factor))
 
     run = register(jobs)
     names = sorted({c.view_names for c in captures})
@@ -67,14 +74,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
     start = time.perf_counter()
     fit = GlobalAlignConfig()  # Levenberg-Marquardt, as a single capture's alignment
-    calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
+    calibration = in_photo_pixels(calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit))
     for round_ in range(args.rounds):  # re-match through the rig, fit again (its matches snap to the right ridges)
         used = [job for job in jobs if job.name in calibration.used]
         captures.clear()
         register(used, calibration.rig, desc=f"fs3d rig calibrate: round {round_ + 1}")
         if len(captures) < 2:
             break
-        calibration = calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit)
+        calibration = in_photo_pixels(calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit))
     rig = calibration.rig
     rig.info.update(failed=failures, rounds=args.rounds, register_seconds=round(run["wall_s"], 1),
                     fit_seconds=round(time.perf_counter() - start, 1))
@@ -88,11 +95,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register_job(job, config, threads: int, rig=None):
+def _shared_factor(jobs, ridge_px: float | None) -> float:
+    """The working resolution of the first capture that can be read (1 when none can: their failures come later,
+    each with its reason)."""
+    from ..io.jobs import load_job
+    from ..working_scale import working_views
+
+    for job in jobs:
+        try:
+            return working_views(load_job(job).views, ridge_px)[2].factor
+        except InputError:
+            continue
+    return 1.0
+
+
+def register_job(job, config, threads: int, rig=None, factor: float | None = None):
     """A Ray task of 'fs3d rig calibrate': one capture registered (what the calibration pools)."""
     from ..device import use_threads
     from ..io.jobs import load_job
     from ..pipeline import register_capture
 
     use_threads(threads)
-    return register_capture(load_job(job), config, rig)
+    return register_capture(load_job(job), config, rig, factor)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ...errors import InputError
 
-__all__ = ["as_gray", "estimate_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture",
+__all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture",
            "DEFAULT_PERIOD_PX"]
 
 DEFAULT_PERIOD_PX = 8.0
@@ -53,7 +53,15 @@ def as_gray(image: np.ndarray, name: str = "image") -> np.ndarray:
 
 def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_period: float = 3.0,
                           max_period: float = 40.0) -> float:
-    """Dominant ridge period in pixels (see the module docstring); ``DEFAULT_PERIOD_PX`` when none.
+    """Dominant ridge period in pixels (see the module docstring); ``DEFAULT_PERIOD_PX`` when none."""
+    period = measure_ridge_period(gray, mask, min_period, max_period)
+    return DEFAULT_PERIOD_PX if period is None else period
+
+
+def measure_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_period: float = 3.0,
+                         max_period: float = 40.0) -> float | None:
+    """Dominant ridge period in pixels, or None when no tile shows a ridge peak (a featureless image, or ridges
+    finer than ``min_period``).
 
     Tiles of 96 px lying inside the (eroded) mask, shading removed by a high-pass, Hann window;
     each tile votes its strongest peak between ``min_period`` and ``max_period`` with the peak's
@@ -65,14 +73,14 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
         raise InputError(f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {gray.shape[1]}x{gray.shape[0]}")
     rows, cols = np.nonzero(mask)
     if rows.size == 0:
-        return DEFAULT_PERIOD_PX
+        return None
     mask = ridge_area(mask)
     extent = min(int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1)
     margin = int(min(max_period, 0.1 * extent))  # off the silhouette's edge, where shading drops
     inner = mask if mask.all() or margin < 1 else cv2.erode(mask.astype(np.uint8), np.ones((2 * margin + 1,) * 2, np.uint8)) > 0
     tile = min(_TILE, extent - 2 * margin)
     if tile < 16:
-        return DEFAULT_PERIOD_PX
+        return None
     high_pass = gray - cv2.GaussianBlur(gray, (0, 0), max_period / 2.0)
     window = np.outer(np.hanning(tile), np.hanning(tile))
     yy, xx = np.indices((_FFT, _FFT))
@@ -81,7 +89,7 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
     periods, weights = [], []
     inner_rows, inner_cols = np.nonzero(inner)
     if inner_rows.size == 0:
-        return DEFAULT_PERIOD_PX
+        return None
     step = max(8, tile // 2)
     for top in range(int(inner_rows.min()), int(inner_rows.max()) - tile + 2, step):
         for left in range(int(inner_cols.min()), int(inner_cols.max()) - tile + 2, step):
@@ -99,10 +107,13 @@ def estimate_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_
                 continue
             fy = y + _parabola(power[y - 1, x], power[y, x], power[y + 1, x])
             fx = x + _parabola(power[y, x - 1], power[y, x], power[y, x + 1])
-            periods.append(_FFT / max(np.hypot(fy - _FFT // 2, fx - _FFT // 2), 1e-9))
+            period = _FFT / max(np.hypot(fy - _FFT // 2, fx - _FFT // 2), 1e-9)
+            if not min_period <= period <= max_period:  # the climb left the band: shading, not ridges
+                continue
+            periods.append(period)
             weights.append(contrast)
     if not periods:
-        return DEFAULT_PERIOD_PX
+        return None
     order = np.argsort(periods)
     cumulative = np.cumsum(np.asarray(weights)[order])
     return float(np.asarray(periods)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])

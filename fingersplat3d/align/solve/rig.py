@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from ...device import single_threaded
 from ...rotations import axis_angle_to_matrix
+from ...scene import scaled_size
 from .alignment_problem import InitialState
 from .global_opt import (
     GlobalAlignConfig,
@@ -92,6 +93,12 @@ class Rig:
         poses = [first @ self.cam_to_rig(v) for v in cameras]
         return replace(self, names=tuple(self.names[v] for v in cameras), sizes=tuple(self.sizes[v] for v in cameras),
                        rotations=np.stack([pose[:3, :3] for pose in poses]), centers=np.stack([pose[:3, 3] for pose in poses]))
+
+    def scaled(self, factor: float) -> "Rig":
+        """The same rig for its photos resized by ``factor`` (the working resolution): sizes and focal in its pixels."""
+        if factor == 1.0:
+            return self
+        return replace(self, sizes=tuple(scaled_size(size, factor) for size in self.sizes), focal=self.focal * factor)
 
     def turns_for(self, camera: int, size: tuple[int, int]) -> tuple[int, ...]:
         """Quarter turns a view of ``size`` may be rotated by against camera ``camera``: (0,) or (1, 3) for a portrait one."""

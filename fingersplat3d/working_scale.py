@@ -1,0 +1,190 @@
+"""The working resolution: the geometry runs at a set number of pixels per ridge period, whatever the photo's size.
+
+Ridges are what the registration matches and what the splat fit reproduces, so what sets their accuracy is how
+finely the ridges are sampled, not how many pixels the camera has. A photo that samples them much more finely (a
+20-megapixel camera, an upscaled crop) is scaled down before the masks, the pointmaps, the registration, the
+alignment and the splat fit; the outputs (cameras, depth maps, masks) are put back onto the photo's own pixel grid.
+``docs/measurements.md`` ("Working resolution") measures the rule.
+
+* The finger mask is found on a *survey* copy of at most :data:`SURVEY_SIDE` pixels: the mask's morphology uses
+  discs that grow with the image, so its cost grows with about the fourth power of the side.
+* The ridge period is measured on that copy, or, where the copy samples the ridges too coarsely to trust
+  (:data:`FINE_BELOW_PX`), on a crop of the finger at the photo's own resolution.
+* ``factor = ridge_px / period`` (at most 1), one for every view of a capture (views that share a finger share
+  its ridges); a factor above :data:`MIN_SHRINK` is not worth a resampling and stays 1, and no view's short side
+  goes below :data:`MIN_SIDE`.
+
+Pixel centres are at integer coordinates (``Camera.from_focal`` puts the principal point at ``(W - 1) / 2``), so a
+working pixel ``x`` is the photo's ``(x + 0.5) * W / w - 0.5``, as OpenCV's resizing has it.
+
+Pure numpy/OpenCV: no Open3D, no files.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from .align.correspond.texture import measure_ridge_period
+from .errors import InputError
+from .scene import View, scaled_size
+
+__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views", "resized_mask",
+           "map_on_grid"]
+
+RIDGE_PX = 16.0
+"""Default working pixels per ridge period: the sampling of the real captures the project's accuracy was measured
+at (14-16 px per ridge at 1280x1024), so those run as they are and only finer photos are scaled. 8 px per ridge
+(``--ridge-px 8``) fuses them ~30 % faster for a measured cost on the real ones (docs/measurements.md, "Working
+resolution")."""
+TUNED_PX_PER_RIDGE = 16.0
+"""Pixels per ridge period of the real captures the alignment's robust scale (1 px) was tuned on (14-16); a
+scaled capture's robust scale keeps that share of a period (half a pixel at 8 px per ridge)."""
+SURVEY_SIDE = 1280
+"""Long side (pixels) at most of the copy the masks and the first ridge period are found on."""
+FINE_BELOW_PX = 6.0
+"""A ridge period below this on the survey copy is measured again on a photo-resolution crop of the finger."""
+CROP_SIDE = 1024
+"""Side (pixels) at most of that crop."""
+MIN_SHRINK = 0.8
+"""A factor above this keeps the photo's own resolution (a resampling would cost more than it saves)."""
+MIN_SIDE = 256
+"""A view's short side is never scaled below this many pixels."""
+MASK_SIDE_MAX = 2560
+"""Above the survey size and up to this long side, the working copy gets its own mask (sharper edges than the
+survey's, at ~1 s); above it, the survey's mask is resized."""
+
+
+def _resized(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` at ``size`` = (width, height): area averaging down, bilinear up."""
+    if (image.shape[1], image.shape[0]) == tuple(size):
+        return image
+    shrink = size[0] < image.shape[1]
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+
+
+def resized_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A bool mask at ``size`` = (width, height): its coverage resampled and cut at one half (smooth edges both ways)."""
+    if (mask.shape[1], mask.shape[0]) == tuple(size):
+        return np.asarray(mask, bool)
+    return _resized(np.asarray(mask, np.float32), size) > 0.5
+
+
+@dataclass(frozen=True)
+class WorkingScale:
+    """How a capture's photos were scaled for the geometry."""
+
+    factor: float
+    """Working pixels per photo pixel (1: the photo's own grid)."""
+    period_px: float
+    """The finger's ridge period in photo pixels (median over the views)."""
+    ridge_px: float | None
+    """The pixels per ridge asked for (None: the photo's own resolution)."""
+
+    def size(self, size: tuple[int, int]) -> tuple[int, int]:
+        return size if self.factor == 1.0 else scaled_size(size, self.factor)
+
+    def as_report(self, photo_sizes: Sequence[tuple[int, int]]) -> dict:
+        return {"factor": round(self.factor, 4),
+                "ridge_period_photo_px": round(self.period_px, 2) if np.isfinite(self.period_px) else None,
+                "ridge_px_asked": self.ridge_px, "sizes": [list(self.size(size)) for size in photo_sizes]}
+
+
+def _survey(view: View) -> tuple[float, np.ndarray]:
+    """(survey factor, finger mask at that factor) of one view; the photo's own mask when it has one."""
+    from .segment.masks import finger_mask
+
+    factor = min(1.0, SURVEY_SIDE / max(view.width, view.height))
+    size = scaled_size((view.width, view.height), factor)
+    if view.mask is not None:
+        return factor, resized_mask(view.mask, size)
+    return factor, finger_mask(_resized(view.image, size), name=f"view {view.name!r}")
+
+
+def _photo_period(view: View, factor: float, mask: np.ndarray) -> float:
+    """The view's ridge period in photo pixels, from its survey copy or a photo-resolution crop of the finger;
+    NaN when neither shows ridges."""
+    size = (mask.shape[1], mask.shape[0])
+    period = measure_ridge_period(_resized(view.image, size), mask)
+    if factor == 1.0 or (period is not None and period >= FINE_BELOW_PX):
+        return float("nan") if period is None else period / factor
+    rows, cols = np.nonzero(mask)  # centre of the finger: its ridges, away from the rims
+    centre = np.array([np.median(cols), np.median(rows)]) / factor
+    half = CROP_SIDE // 2
+    left = int(np.clip(centre[0] - half, 0, max(0, view.width - CROP_SIDE)))
+    top = int(np.clip(centre[1] - half, 0, max(0, view.height - CROP_SIDE)))
+    width, height = min(CROP_SIDE, view.width - left), min(CROP_SIDE, view.height - top)
+    if view.mask is not None:
+        crop_mask = view.mask[top:top + height, left:left + width]
+    else:  # the survey mask carried up onto the crop only (photo pixel x is survey pixel (x + 0.5) * factor - 0.5)
+        onto_survey = np.array([[factor, 0.0, (left + 0.5) * factor - 0.5], [0.0, factor, (top + 0.5) * factor - 0.5]])
+        crop_mask = cv2.warpAffine(mask.astype(np.float32), onto_survey, (width, height),
+                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
+    fine = measure_ridge_period(view.image[top:top + height, left:left + width], crop_mask)
+    return float("nan") if fine is None else fine
+
+
+def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> float:
+    if ridge_px is None or not np.isfinite(period_px) or period_px <= 0:
+        return 1.0
+    factor = max(ridge_px / period_px, max(MIN_SIDE / min(size) for size in sizes))
+    return 1.0 if factor > MIN_SHRINK else float(factor)
+
+
+def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
+                  factor: float | None = None) -> tuple[list[View], list[View], WorkingScale]:
+    """``(photo views, working views, scale)``: both with finger masks (the photos' own where given).
+
+    ``ridge_px``: working pixels per ridge period (None: the photos' own resolution); ``factor``: a scale to use
+    instead of measuring one (a rig calibration scales all its captures alike).
+    """
+    if ridge_px is not None and not (np.isfinite(ridge_px) and ridge_px > 0):
+        raise InputError(f"pixels per ridge must be a positive number, got {ridge_px}")
+    surveys = [_survey(view) for view in views]
+    for view, (_, mask) in zip(views, surveys):
+        if mask.sum() < 16:
+            raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
+    sizes = [(view.width, view.height) for view in views]
+    period = float("nan")  # not measured when nothing depends on it
+    if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
+        periods = [_photo_period(view, f, mask) for view, (f, mask) in zip(views, surveys)]
+        period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
+    factor = _factor(period, ridge_px, sizes) if factor is None else factor
+    scale = WorkingScale(float(factor), period, ridge_px)
+    photo, working = [], []
+    for view, (survey_factor, survey_mask) in zip(views, surveys):
+        size = scale.size((view.width, view.height))
+        image = _resized(view.image, size)
+        if view.mask is not None:
+            mask = resized_mask(view.mask, size)
+        elif scale.factor > survey_factor and max(size) <= MASK_SIDE_MAX:
+            from .segment.masks import finger_mask
+
+            mask = finger_mask(image, name=f"view {view.name!r}")
+        else:
+            mask = resized_mask(survey_mask, size)
+        photo_mask = view.mask if view.mask is not None else resized_mask(
+            mask if scale.factor >= survey_factor else survey_mask, (view.width, view.height))
+        photo.append(view.with_(mask=photo_mask))
+        working.append(photo[-1] if scale.factor == 1.0 else View(view.name, image, mask))
+    return photo, working, scale
+
+
+def map_on_grid(values: np.ndarray, size: tuple[int, int], mask: np.ndarray | None = None) -> np.ndarray:
+    """A per-pixel map (NaN where it has no value) resampled to ``size``; NaN outside ``mask`` and where no finite
+    value is near. Values are averaged over finite neighbours only, so no NaN bleeds into the finger and no
+    background into its rim."""
+    values = np.asarray(values, np.float32)
+    if (values.shape[1], values.shape[0]) == tuple(size):
+        out = values.copy()
+    else:
+        finite = np.isfinite(values)
+        weight = _resized(finite.astype(np.float32), size)
+        total = _resized(np.where(finite, values, 0.0).astype(np.float32), size)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.where(weight > 1e-3, total / weight, np.nan).astype(np.float32)
+    if mask is not None:
+        out[~np.asarray(mask, bool)] = np.nan
+    return out

@@ -1,0 +1,123 @@
+"""The working resolution: photos that sample the ridges finely are fused at a set pixels per ridge, and the
+outputs come back on the photos' own grid."""
+import cv2
+import numpy as np
+import pytest
+
+from fingersplat3d.align.solve.rig import Rig
+from fingersplat3d.errors import InputError
+from fingersplat3d.eval import depth_errors, relative_rotation_errors
+from fingersplat3d.pipeline import FuseConfig, fuse
+from fingersplat3d.scene import Camera, Capture, View, look_at
+from fingersplat3d.synth import SynthConfig, synthesize
+from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, map_on_grid, resized_mask, working_views
+
+
+@pytest.fixture(scope="module")
+def uwa1280():
+    return synthesize(1, SynthConfig(size=(1280, 1024))).capture
+
+
+def _upscaled(view: View, factor: float) -> View:
+    size = (round(view.width * factor), round(view.height * factor))
+    return View(view.name, cv2.resize(view.image, size, interpolation=cv2.INTER_CUBIC).clip(0, 1))
+
+
+def test_fine_photos_are_scaled_to_the_asked_pixels_per_ridge(uwa1280):
+    views = [View(v.name, v.image) for v in uwa1280.views]  # images only: masks are found
+    photo, working, scale = working_views(views, 8.0)
+    assert 0.3 < scale.factor < 0.6  # ~18 px per ridge at 1280x1024
+    assert scale.period_px * scale.factor == pytest.approx(8.0, rel=0.02)
+    for original, p, w in zip(views, photo, working):
+        assert p.image is original.image and p.mask.shape == original.image.shape[:2]
+        assert (w.width, w.height) == (round(1280 * scale.factor), round(1024 * scale.factor))
+        assert w.mask.shape == (w.height, w.width) and w.mask.any()
+        # the masks agree: the photo's mask brought down is the working one
+        assert (resized_mask(p.mask, (w.width, w.height)) == w.mask).mean() > 0.995
+
+
+def test_photos_near_the_asked_resolution_or_none_asked_are_kept(uwa640, uwa1280):
+    _, working, scale = working_views(uwa640.views, 8.0)  # ~9 px per ridge: not worth a resampling
+    assert scale.factor == 1.0 and all(w.image is v.image for w, v in zip(working, uwa640.views))
+    _, working, scale = working_views(uwa1280.views, RIDGE_PX)  # ~18 px: the default keeps it
+    assert scale.factor == 1.0 and all(w.image is v.image for w, v in zip(working, uwa1280.views))
+    _, working, scale = working_views(uwa640.views, None)
+    assert scale.factor == 1.0 and np.isnan(scale.period_px)
+    with pytest.raises(InputError, match="pixels per ridge"):
+        working_views(uwa640.views, 0.0)
+    flat = [View(v.name, np.where(v.mask, 0.6, 0.05).astype(np.float32)) for v in uwa640.views]
+    _, _, scale = working_views(flat, 8.0)  # no ridges to measure: the photos as they are
+    assert scale.factor == 1.0 and np.isnan(scale.period_px)
+
+
+def test_ridge_periods_measured_on_the_survey_copy_or_at_full_resolution(uwa640):
+    view = uwa640.views[1]
+    _, _, own = working_views([view], 8.0)  # ~9 px per ridge
+    # A finger small in a large frame: ~2 px per ridge on the quarter-size survey copy, too fine to see there:
+    # measured again on a photo-resolution crop.
+    canvas = np.zeros((4096, 5120) + view.image.shape[2:], np.float32)
+    canvas[1792:2304, 2240:2880] = view.image
+    _, working, scale = working_views([View("small", canvas)], 8.0)
+    assert scale.period_px == pytest.approx(own.period_px, rel=0.1) and scale.factor == 1.0
+    # A photo 4x finer (2560 px, ~36 px per ridge): surveyed at 1280, scaled to the asked sampling.
+    _, working, scale = working_views([_upscaled(view, 4.0)], RIDGE_PX)
+    assert scale.period_px == pytest.approx(own.period_px * 4.0, rel=0.1)
+    assert working[0].width == round(view.width * 4.0 * scale.factor)
+    assert scale.period_px * scale.factor == pytest.approx(RIDGE_PX, rel=1e-6)
+
+
+def test_the_working_side_never_falls_below_its_floor(uwa640):
+    small = [View(v.name, cv2.GaussianBlur(v.image, (0, 0), 1.0)) for v in uwa640.views]
+    _, working, scale = working_views(small, 1.0)  # 1 px per ridge asked: held at the floor
+    assert min(w.width for w in working) >= MIN_SIDE - 1 and min(w.height for w in working) >= MIN_SIDE - 1
+
+
+def test_camera_resized_keeps_pixel_centres():
+    camera = Camera.from_focal(900.0, 1280, 1024, look_at([0, 0, -5], [0, 0, 0], [0, -1, 0]))
+    small = camera.resized((640, 512))
+    points = np.random.default_rng(0).normal(size=(50, 3))
+    uv, _ = camera.project(points)
+    uv_small, _ = small.project(points)
+    assert np.allclose(uv_small, (uv + 0.5) * 0.5 - 0.5)
+    assert small.K[0, 2] == pytest.approx((640 - 1) / 2) and small.K[0, 0] == pytest.approx(450.0)
+    back = small.resized((1280, 1024))
+    assert np.allclose(back.K, camera.K) and np.array_equal(back.world_to_cam, camera.world_to_cam)
+    assert camera.scaled(0.5).K == pytest.approx(small.K)
+
+
+def test_maps_come_back_without_bleeding_across_the_rim():
+    depth = np.full((40, 50), np.nan, np.float32)
+    depth[10:30, 12:40] = 7.0
+    mask = np.zeros((80, 100), bool)
+    mask[20:60, 24:80] = True
+    up = map_on_grid(depth, (100, 80), mask)
+    assert np.isnan(up[~mask]).all()
+    inside = up[mask]
+    assert np.isfinite(inside).mean() > 0.98 and np.allclose(inside[np.isfinite(inside)], 7.0)
+    assert np.isnan(map_on_grid(np.full((4, 5), np.nan, np.float32), (10, 8))).all()  # nothing to spread: NaN
+    huge = map_on_grid(np.full((4, 5), 3e38, np.float32), (10, 8))  # extremes stay finite
+    assert np.isfinite(huge).all()
+
+
+def test_rig_scaled_to_the_working_resolution():
+    rig = Rig(("a", "b"), ((1280, 1024), (1024, 1280)), np.stack([np.eye(3)] * 2), np.zeros((2, 3)), 1700.0)
+    small = rig.scaled(0.5)
+    assert small.sizes == ((640, 512), (512, 640)) and small.focal == pytest.approx(850.0)
+    assert small.turns_for(1, (640, 512)) == (1, 3) and rig.scaled(1.0) is rig
+
+
+def test_fuse_of_fine_photos_answers_on_their_own_grid(uwa1280):
+    blind = Capture(tuple(View(v.name, v.image) for v in uwa1280.views), uwa1280.metadata)
+    result = fuse(blind, FuseConfig(splat=None, ridge_px=8.0))
+    working = result.report["working_resolution"]
+    assert working["factor"] < 0.6 and working["sizes"][0] == [round(1280 * working["factor"]), round(1024 * working["factor"])]
+    assert result.registered
+    errors = relative_rotation_errors([c.world_to_cam for c in result.cameras], [v.camera.world_to_cam for v in uwa1280.views])
+    assert max(errors) < 5  # measured within 1 degree (docs/measurements.md); a broken alignment is tens
+    for view, truth, camera, depth in zip(result.capture.views, uwa1280.views, result.cameras, result.depths):
+        assert camera.size == (1280, 1024) and depth.shape == (1024, 1280) and view.mask.shape == (1024, 1280)
+        # the focal is in photo pixels: close to the true one, not to half of it
+        assert camera.K[0, 0] == pytest.approx(truth.camera.K[0, 0], rel=0.35)
+        error = depth_errors(depth, truth.depth, truth.mask)
+        assert error.coverage > 0.95 and error.mae < 0.6
+    assert max(result.report["alignment"]["focals_px"]) == pytest.approx(result.cameras[0].K[0, 0], rel=1e-6)
