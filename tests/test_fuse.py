@@ -232,3 +232,24 @@ def test_crops_without_a_fingertip_register(seed):
     angles = [[rotation_angle_deg(a[:3, :3], b[:3, :3]) for a, b in itertools.combinations(poses, 2)]
               for poses in ([c.world_to_cam for c in result.cameras], [v.camera.world_to_cam for v in truth.views])]
     assert np.max(np.abs(np.subtract(*angles))) < 3.0  # measured 0.05-1.0; through mirrored charts, tens of degrees
+
+
+def test_photos_on_a_bright_background_are_fused(uwa):
+    """Phone-style photos: the finger on a bright desk, no dark background (segment/any_background.py). Measured
+    with seed 1: masks IoU 0.98-0.99, pair rotations 0.3-0.6 degrees off, depth 0.07-0.13 mm (dark: 0.07-0.16)."""
+    import cv2
+
+    from fingersplat3d.segment.masks import mask_iou
+
+    rng = np.random.default_rng(0)
+    views = []
+    for view in uwa.views:
+        soft = cv2.GaussianBlur(view.mask.astype(np.float32), (0, 0), 1.0)
+        desk = 0.82 + 0.03 * rng.normal(size=view.image.shape)
+        views.append(View(view.name, (soft * view.image + (1 - soft) * desk).clip(0, 1).astype(np.float32)))
+    result = fuse(Capture(tuple(views), uwa.metadata), GEOMETRY)
+    assert result.registered
+    assert all(mask_iou(found.mask, view.mask) > 0.95 for found, view in zip(result.capture.views, uwa.views))
+    errors = relative_rotation_errors([c.world_to_cam for c in result.cameras], [v.camera.world_to_cam for v in uwa.views])
+    assert max(errors) < 3
+    assert all(depth_errors(depth, view.depth, view.mask).mae < 0.6 for depth, view in zip(result.depths, uwa.views))

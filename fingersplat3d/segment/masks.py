@@ -1,4 +1,8 @@
-"""Classical finger segmentation: a finger photographed on a dark background.
+"""Classical finger segmentation: a finger photographed on a dark background (and the switch to any other).
+
+A photo whose frame border is not dark (a phone photo on a desk, a bright or cluttered room) goes to
+:mod:`fingersplat3d.segment.any_background` instead; every dark-background photo of the project's data (real,
+another group's renders, synthetic) has its border ring at most 0.1 of its bright end.
 
 :func:`finger_mask` works on one image (grayscale ``H x W`` or RGB ``H x W x 3``, float in [0, 1],
 any exposure: 16-bit data that only uses the bottom of the range works too):
@@ -32,6 +36,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from .regions import fill_holes
 
 __all__ = ["finger_mask", "mask_iou"]
 
@@ -42,12 +47,20 @@ MIN_AREA_PX = 4  # fewer finger pixels than this is no finger
 LOW_MASK_EROSION_PX = 2  # more than the outward bias of the noise-floor edge (~1 px after blurs)
 ROUGH_LEVEL = 0.25  # share of the skin contrast above which the first, rough mask lies (above dim glows)
 NOTCH_RADIUS_SCALE = 4  # notches (valleys, a crease) narrower than this many closing radii are filled
+DARK_BORDER_SHARE = 0.35  # a border ring darker than this share of the bright end is a dark background
 EDGE_BAND = (1.5, 4.0)  # band inside the rough mask (px from its edge) where the edge skin level is read
 
 
 def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
-    """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` in [0, 1])."""
+    """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` in [0, 1]): on a dark
+    background by brightness (below); on any other (the frame's border ring brighter than
+    :data:`DARK_BORDER_SHARE` of the image's bright end) by its ridges and GrabCut
+    (:mod:`~fingersplat3d.segment.any_background`)."""
     brightness = _brightness(image, name)
+    if not _dark_border(brightness):
+        from .any_background import finger_mask_any_background
+
+        return finger_mask_any_background(np.asarray(image, np.float32), name=name)
     height, width = brightness.shape
     smooth = cv2.GaussianBlur(brightness, (0, 0), SMOOTH_SIGMA_PX, borderType=cv2.BORDER_REPLICATE)
     floor, threshold = _thresholds(smooth, name)
@@ -68,11 +81,24 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     mask = _largest_component(_smooth_outline(mask8.view(bool), radius).view(np.uint8))
     if mask is None or mask.sum() < min(MIN_AREA_PX, height * width):
         raise InputError(f"{name}: no finger found (nothing stands out from the dark background)")
-    mask = _fill_holes(mask)
+    mask = fill_holes(mask)
     if mask.mean() > MAX_COVERAGE:
         raise InputError(f"{name}: the finger covers {100 * mask.mean():.0f}% of the image, "
                          "so there is no background to separate it from")
     return mask
+
+
+def _dark_border(brightness: np.ndarray) -> bool:
+    """Whether the frame's border ring (2 % of the long side) is dark: its median at most
+    :data:`DARK_BORDER_SHARE` of the image's 90th percentile brightness. A finger enters the frame at one side at
+    most two, so the ring is mostly background."""
+    height, width = brightness.shape
+    ring = max(1, int(0.02 * max(height, width)))
+    border = np.concatenate([brightness[:ring].ravel(), brightness[-ring:].ravel(),
+                             brightness[:, :ring].ravel(), brightness[:, -ring:].ravel()])
+    step = max(1, int(np.sqrt(brightness.size / 65536)))
+    bright = float(np.percentile(brightness[::step, ::step], 90))
+    return bool(np.median(border) <= DARK_BORDER_SHARE * bright)
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -164,16 +190,6 @@ def _largest_component(mask8: np.ndarray) -> np.ndarray | None:
         return None
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     return labels == largest
-
-
-def _fill_holes(mask: np.ndarray) -> np.ndarray:
-    """Fill background regions that do not reach the image border."""
-    count, labels = cv2.connectedComponents((~mask).view(np.uint8), connectivity=4)
-    if count <= 2:
-        return mask
-    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    outside = np.isin(labels, border[border > 0])
-    return ~outside
 
 
 def _smooth_outline(mask: np.ndarray, radius: int) -> np.ndarray:

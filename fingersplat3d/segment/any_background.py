@@ -1,0 +1,165 @@
+"""A finger on any background (a phone photo on a bright desk, a cluttered room): found by its ridges, then cut out
+by GrabCut.
+
+The dark-background segmentation (:mod:`fingersplat3d.segment.masks`) needs the finger to be the bright thing in
+the frame. Elsewhere brightness says little, but one thing is only on the finger: **friction ridges**, a texture of
+one period and a slowly turning orientation. So:
+
+1. the image is worked on at most :data:`WORK_SIDE` px (GrabCut's colour models need no more);
+2. OpenCV's GrabCut (colour mixture models and a graph cut) separates what stands apart from the frame's border
+   ring, taken as background: a finger enters the frame at one side, so the ring is mostly background;
+3. of the pieces that stand apart, the finger is the one with ridges: per pixel, a ridge score (:func:`ridge_score`:
+   a periodic texture, strong against the image's median; the best over the periods :data:`PERIODS_PX`) counted
+   inside each piece away from its outline;
+4. a second GrabCut told what the finger is (that piece's ridged area) and what it is not (everything outside the
+   piece), so that background stuff that went along with the finger falls away;
+5. the finger carried out across the border ring where it reaches it (a finger the frame cuts stays cut by the
+   frame), holes filled, back to full size with a smooth edge.
+
+It fails with an :class:`~fingersplat3d.errors.InputError` when no ridge area stands out (a photo with no finger,
+or one too blurred to show ridges). Pure numpy/OpenCV.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from .regions import fill_holes
+
+__all__ = ["finger_mask_any_background", "ridge_score", "WORK_SIDE", "PERIODS_PX"]
+
+WORK_SIDE = 640
+"""Long side (pixels) GrabCut and the ridge score work at."""
+PERIODS_PX = (3.0, 4.5, 6.5)
+"""Ridge periods (pixels at the working size) the ridge score is searched over."""
+MIN_RIDGE_SHARE = 0.003
+"""A finger shows ridges over at least this share of the working image ..."""
+MIN_RIDGE_AREA_PX = 400
+"""... and over at least this many working pixels (a few ridges each way)."""
+RIDGE_LEVEL = 0.15
+"""Ridge score above which a pixel counts as showing ridges."""
+STRENGTH_FLOOR = 8.0
+"""Band energy is weighed against this many times its median over the image."""
+SEED_RADIUS = 10
+"""Radius (working pixels) of the opening that keeps areas of ridges and drops lines (the edges of other things)."""
+SKIN_DISTANCE = 1.5
+"""Border-ring pixels this close to the pad's colour (in its standard deviations) may be finger."""
+RING_SHARE = 0.02
+"""Width of the frame's border ring GrabCut takes as background, as a share of the long side."""
+GRABCUT_ITERATIONS = 5
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    return image if image.ndim == 2 else image @ np.array([0.299, 0.587, 0.114], np.float32)
+
+
+def ridge_score(gray: np.ndarray, period: float) -> np.ndarray:
+    """Per-pixel ridge evidence in [0, 1) at ``period`` px: how periodic the texture is (the energy of a band around
+    ``period`` over itself plus those of the bands three times finer and coarser: near 1 on ridges, low at the edge
+    of a plain object, whose step spreads over every band, and in sensor noise, which is finest) times how strong
+    (``e / (e + 8 median)``)."""
+    blurred = [gray] + [cv2.GaussianBlur(gray, (0, 0), sigma) for sigma in (0.15 * period, 0.45 * period, 1.35 * period)]
+    fine_band, ridge_band, coarse_band = (blurred[k] - blurred[k + 1] for k in range(3))
+    smooth = [cv2.GaussianBlur(band * band, (0, 0), period) for band in (fine_band, ridge_band, coarse_band)]  # ~2 ridges
+    fine, ridge, coarse = smooth
+    periodic = ridge / np.maximum(ridge + coarse + fine, 1e-12)
+    floor = STRENGTH_FLOOR * max(float(np.median(ridge)), 1e-12)
+    return (periodic * ridge / (ridge + floor)).astype(np.float32)
+
+
+def _ridge_evidence(gray: np.ndarray) -> np.ndarray:
+    """The best ridge score over the searched periods, per pixel."""
+    return np.max([ridge_score(gray, period) for period in PERIODS_PX], axis=0)
+
+
+def _ring(shape: tuple[int, int], width: int) -> np.ndarray:
+    ring = np.zeros(shape, bool)
+    ring[:width], ring[-width:], ring[:, :width], ring[:, -width:] = True, True, True, True
+    return ring
+
+
+def _to_border(finger: np.ndarray, width: int) -> np.ndarray:
+    """The mask carried out across the border ring from the ring's inner edge."""
+    out = finger.copy()
+    out[:width] = finger[width][None]
+    out[-width:] = finger[-width - 1][None]
+    out[:, :width] = out[:, width][:, None]
+    out[:, -width:] = out[:, -width - 1][:, None]
+    return out
+
+
+def _pad(evidence: np.ndarray) -> np.ndarray | None:
+    """The largest area of ridges (lines, the edges of other things, dropped by an opening), or None."""
+    ridged = cv2.morphologyEx((evidence > RIDGE_LEVEL).view(np.uint8), cv2.MORPH_OPEN,
+                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEED_RADIUS + 1,) * 2))
+    count, blobs, stats, _ = cv2.connectedComponentsWithStats(ridged, connectivity=8)
+    if count < 2:
+        return None
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    enough = max(MIN_RIDGE_SHARE * evidence.size, MIN_RIDGE_AREA_PX)
+    return blobs == largest if stats[largest, cv2.CC_STAT_AREA] >= enough else None
+
+
+def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, ring_width: int) -> np.ndarray:
+    """A second GrabCut, now told what the finger is (its ridged area) and what it is not (everything outside the
+    piece): background stuff that first went along with the finger (it was not in the border ring) falls away."""
+    ridged = cv2.morphologyEx(((evidence > RIDGE_LEVEL) & piece).view(np.uint8), cv2.MORPH_OPEN,
+                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEED_RADIUS + 1,) * 2))
+    count, blobs, stats, _ = cv2.connectedComponentsWithStats(ridged, connectivity=8)
+    if count < 2:
+        return piece
+    ridged = blobs == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))  # the pad: one area of ridges, not lines
+    labels = np.where(piece, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8)
+    labels[_ring(piece.shape, ring_width)] = cv2.GC_BGD
+    labels[ridged] = cv2.GC_FGD
+    background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.grabCut(colour8, labels, None, background_model, foreground_model, GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+    finger = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+    count, components = cv2.connectedComponents(finger.view(np.uint8), connectivity=8)
+    held = np.unique(components[ridged & finger])
+    return np.isin(components, held[held > 0])
+
+
+def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.ndarray:
+    """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` float in [0, 1]) on any
+    background (see the module docstring)."""
+    height, width = image.shape[:2]
+    factor = min(1.0, WORK_SIDE / max(height, width))
+    size = (max(1, round(width * factor)), max(1, round(height * factor)))
+    small = cv2.resize(image, size, interpolation=cv2.INTER_AREA) if factor < 1.0 else image
+    small = np.clip(np.asarray(small, np.float32), 0.0, 1.0)
+    gray = _gray(small)
+    ring_width = max(2, int(RING_SHARE * max(size)))
+    colour = small if small.ndim == 3 else np.repeat(small[..., None], 3, axis=2)
+    colour8 = np.ascontiguousarray((colour * 255.0 + 0.5).astype(np.uint8))
+    evidence = _ridge_evidence(gray)
+    pad = _pad(evidence)
+    ring = _ring(gray.shape, ring_width)
+    labels = np.where(ring, cv2.GC_BGD, cv2.GC_PR_FGD).astype(np.uint8)
+    if pad is not None:  # skin where the finger enters the frame is not sure background; the pad is sure finger
+        skin = colour[pad]
+        distance = np.linalg.norm((colour - skin.mean(0)) / (skin.std(0) + 0.02), axis=-1)
+        labels[ring & (distance < SKIN_DISTANCE)] = cv2.GC_PR_BGD
+        labels[pad] = cv2.GC_FGD
+    cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
+    background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.grabCut(colour8, labels, None, background_model, foreground_model, GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+    candidates = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+    count, components, stats, _ = cv2.connectedComponentsWithStats(candidates.view(np.uint8), connectivity=8)
+    best, best_count = 0, max(MIN_RIDGE_SHARE * gray.size, MIN_RIDGE_AREA_PX)
+    for label in range(1, count):
+        if stats[label, cv2.CC_STAT_AREA] < best_count:
+            continue
+        inner = cv2.erode((components == label).view(np.uint8), np.ones((7, 7), np.uint8)).view(bool)
+        ridged = float(np.count_nonzero(evidence[inner] > RIDGE_LEVEL))
+        if ridged >= best_count:
+            best, best_count = label, ridged
+    if best == 0:
+        raise InputError(f"{name}: no finger found: nothing that stands apart from the frame's edges shows ridges "
+                         "(out of focus, or no background to separate a finger from)")
+    finger = _refined(colour8, components == best, evidence, ring_width)
+    finger = fill_holes(_to_border(finger, ring_width))
+    if factor < 1.0:  # back to full size with a smooth edge
+        finger = cv2.resize(finger.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR) > 0.5
+    return finger
