@@ -12,7 +12,8 @@ one period and a slowly turning orientation. So:
    a periodic texture, strong against the image's median; the best over the periods :data:`PERIODS_PX`) counted
    inside each piece away from its outline;
 4. a second GrabCut told what the finger is (that piece's ridged area) and what it is not (everything outside the
-   piece), so that background stuff that went along with the finger falls away;
+   piece; inside it, what is far from the pad's colour starts as probable background), so that background stuff
+   that went along with the finger falls away;
 5. the finger carried out across the border ring where it reaches it (a finger the frame cuts stays cut by the
    frame), holes filled, back to full size with a smooth edge.
 
@@ -45,6 +46,9 @@ SEED_RADIUS = 10
 """Radius (working pixels) of the opening that keeps areas of ridges and drops lines (the edges of other things)."""
 SKIN_DISTANCE = 1.5
 """Border-ring pixels this close to the pad's colour (in its standard deviations) may be finger."""
+PIECE_SKIN_DISTANCE = 5.0
+"""In the second cut, parts of the first piece farther than this from the pad's colour (its standard deviations)
+start as probable background."""
 RING_SHARE = 0.02
 """Width of the frame's border ring GrabCut takes as background, as a share of the long side."""
 GRABCUT_ITERATIONS = 5
@@ -110,7 +114,10 @@ def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, ring_
     if count < 2:
         return piece
     ridged = blobs == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))  # the pad: one area of ridges, not lines
-    labels = np.where(piece, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8)
+    skin = colour8[ridged].astype(np.float32)
+    distance = np.linalg.norm((colour8 - skin.mean(0)) / (skin.std(0) + 5.0), axis=-1)
+    labels = np.where(piece & (distance < PIECE_SKIN_DISTANCE), cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
+    labels[~piece] = cv2.GC_BGD
     labels[_ring(piece.shape, ring_width)] = cv2.GC_BGD
     labels[ridged] = cv2.GC_FGD
     background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
