@@ -229,3 +229,25 @@ def test_fs3d_print_mirror_flips_the_print(tmp_path):
     plain = cv2.imread(str(tmp_path / "a" / "center.png"), cv2.IMREAD_GRAYSCALE)
     mirrored = cv2.imread(str(tmp_path / "b" / "center.png"), cv2.IMREAD_GRAYSCALE)
     assert np.array_equal(plain[:, ::-1], mirrored)
+
+
+def test_fs3d_print_of_a_photo_on_a_bright_background(tmp_path):
+    """A phone-style photo (the finger on a bright desk) gives the same print area as on the rig's dark background."""
+    from fingersplat3d.segment.masks import finger_mask
+
+    photo = cv2.imread(str(SAMPLE / "images" / "center.png"))
+    mask = finger_mask(photo.astype(np.float32) / 255.0)
+    soft = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.0)[..., None]
+    desk = 210.0 + np.random.default_rng(0).normal(0, 6, photo.shape)
+    (tmp_path / "dark").mkdir()
+    (tmp_path / "bright").mkdir()
+    cv2.imwrite(str(tmp_path / "dark" / "finger.png"), photo)
+    cv2.imwrite(str(tmp_path / "bright" / "finger.png"), (soft * photo + (1 - soft) * desk).clip(0, 255).astype(np.uint8))
+    areas = {}
+    for kind in ("dark", "bright"):
+        out = tmp_path / f"prints_{kind}"
+        assert main(["print", str(tmp_path / kind / "finger.png"), "-o", str(out), "--no-nfiq2"]) == 0
+        row = next(csv.DictReader((out / "prints.csv").open()))
+        assert row["status"] == "done"
+        areas[kind] = float(row["area_mm2"])
+    assert areas["bright"] == pytest.approx(areas["dark"], rel=0.15)
