@@ -191,14 +191,15 @@ def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfi
 
 
 def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_pointmaps, config: FuseConfig,
-              report: dict, say, rig: Rig | None = None) -> GlobalAlignment:
+              report: dict, say, rig: Rig | None = None, period_px: float | None = None) -> GlobalAlignment:
     """Pair relations of the distinct ``pairs`` and the global alignment: image correspondences, or the
     backend's pairwise pointmaps."""
     identical = [{"a": capture.views[a].name, "b": capture.views[b].name, "ok": False,
                   "reason": "identical images: no parallax (monocular mode)"}
                  for a in range(len(capture)) for b in range(a + 1, len(capture)) if (a, b) not in pairs]
     if pair_pointmaps is None:
-        registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig)
+        registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig,
+                                      period_px=period_px)
         report["pairs"] = registration.pairs + identical
         report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds,
                                   "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)},
@@ -253,7 +254,8 @@ def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Ri
     config = _in_working_pixels(config, scale)
     pairs = _distinct_pairs(capture)
     pointmaps, _ = _pointmaps(capture, pairs, config, {})
-    registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig)
+    registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig,
+                                  period_px=scale.working_period_px())
     seed = capture.metadata.get("seed")
     name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
@@ -420,7 +422,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         bar.update()
         with step("registration"):
             alignment = _register(capture, pairs, pointmaps, pair_pointmaps, config, report,
-                                  lambda text: bar.set_postfix_str(f"registration: {text}"), rig)
+                                  lambda text: bar.set_postfix_str(f"registration: {text}"), rig,
+                                  scale.working_period_px())
         bar.update()
         report["alignment"] = _alignment_status(capture, pairs, alignment, report)
         cameras = [Camera.from_focal(alignment.focals[v], view.width, view.height, alignment.world_to_cam[v])

@@ -82,6 +82,18 @@ class WorkingScale:
     """The finger's ridge period in photo pixels (median over the views)."""
     ridge_px: float | None
     """The pixels per ridge asked for (None: the photo's own resolution)."""
+    view_periods_px: tuple[float, ...] = ()
+    """Each view's ridge period in photo pixels (NaN: no ridges measured; empty: not measured)."""
+    surveyed_whole: bool = False
+    """Whether every view's survey copy was the photo itself (photos of at most :data:`SURVEY_SIDE` px)."""
+
+    def working_period_px(self) -> float | None:
+        """The capture's ridge period in working pixels when it was measured exactly as the registration measures it
+        (on the working images themselves: every view measured, photos kept as they are), else None."""
+        periods = np.asarray(self.view_periods_px, np.float64)
+        if self.factor != 1.0 or not self.surveyed_whole or not periods.size or not np.isfinite(periods).all():
+            return None
+        return float(np.median(periods))
 
     def size(self, size: tuple[int, int]) -> tuple[int, int]:
         return size if self.factor == 1.0 else scaled_size(size, self.factor)
@@ -147,12 +159,13 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
         if mask.sum() < 16:
             raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
     sizes = [(view.width, view.height) for view in views]
-    period = float("nan")  # not measured when nothing depends on it
+    period, periods = float("nan"), []  # not measured when nothing depends on it
     if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
         periods = [_photo_period(view, f, mask) for view, (f, mask) in zip(views, surveys)]
         period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
     factor = _factor(period, ridge_px, sizes) if factor is None else factor
-    scale = WorkingScale(float(factor), period, ridge_px)
+    scale = WorkingScale(float(factor), period, ridge_px, tuple(float(p) for p in periods),
+                         all(f == 1.0 for f, _ in surveys))
     photo, working = [], []
     for view, (survey_factor, survey_mask) in zip(views, surveys):
         size = scale.size((view.width, view.height))

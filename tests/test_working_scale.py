@@ -121,3 +121,14 @@ def test_fuse_of_fine_photos_answers_on_their_own_grid(uwa1280):
         error = depth_errors(depth, truth.depth, truth.mask)
         assert error.coverage > 0.95 and error.mae < 0.6
     assert max(result.report["alignment"]["focals_px"]) == pytest.approx(result.cameras[0].K[0, 0], rel=1e-6)
+
+
+def test_the_measured_period_is_handed_on_only_when_it_is_the_registrations_own(uwa640, uwa1280):
+    from fingersplat3d.align.correspond.texture import as_gray, estimate_ridge_period
+
+    _, working, scale = working_views(uwa640.views, RIDGE_PX)  # kept as it is: the same images, masks, estimate
+    own = float(np.median([estimate_ridge_period(as_gray(v.image), v.mask) for v in working]))
+    assert scale.working_period_px() == own
+    _, _, scaled = working_views(uwa1280.views, 8.0)  # scaled: the registration measures it on its own images
+    assert scaled.factor < 1 and scaled.working_period_px() is None
+    assert working_views(uwa640.views, None)[2].working_period_px() is None  # nothing measured

@@ -123,10 +123,11 @@ class _Prepared:
         return [silhouette_frame(mask) for mask in self.masks]
 
 
-def _prepare(views: Sequence[View]) -> _Prepared:
+def _prepare(views: Sequence[View], period_px: float | None = None) -> _Prepared:
     grays = [as_gray(view.image, f"view {view.name!r}") for view in views]
     masks = [np.asarray(view.mask, bool) for view in views]
-    period = float(np.median([estimate_ridge_period(gray, mask) for gray, mask in zip(grays, masks)]))
+    period = float(period_px) if period_px else float(np.median([estimate_ridge_period(gray, mask)
+                                                                 for gray, mask in zip(grays, masks)]))
     textures = [ridge_texture(gray, mask, period) for gray, mask in zip(grays, masks)]
     return _Prepared(textures, masks, grays, period)
 
@@ -187,13 +188,14 @@ def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.nda
 
 
 def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config: RegistrationConfig = RegistrationConfig(),
-                   pairs: Sequence[tuple[int, int]] | None = None, progress=None, rig: "Rig | None" = None) -> Registration:
+                   pairs: Sequence[tuple[int, int]] | None = None, progress=None, rig: "Rig | None" = None,
+                   period_px: float | None = None) -> Registration:
     """Align ``views`` (with masks) given their own-frame ``pointmaps`` (see the module docstring).
 
     ``pairs``: the view pairs to try (default: all ``a < b``). ``progress``: an optional callable
     taking a short text, told what the loop is doing. ``rig``: a calibrated rig
     (:mod:`~fingersplat3d.align.solve.rig`) whose camera poses and focal are kept fixed; the views are
-    its cameras in order.
+    its cameras in order. ``period_px``: the views' ridge period (the median of theirs), when already measured.
     """
     from .correspond.features import Matches
     from .solve.pairwise import register_pair
@@ -202,7 +204,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     n_views = len(views)
     pairs = [(a, b) for a in range(n_views) for b in range(a + 1, n_views)] if pairs is None else list(pairs)
     say("ridge texture")
-    prepared = _prepare(views)
+    prepared = _prepare(views, period_px)
     records = {pair: {"a": views[pair[0]].name, "b": views[pair[1]].name, "ok": False, "reason": "", "matches": []}
                for pair in pairs}
     # One tip end for the whole capture: on crops cut at both ends a view's own choice can disagree
