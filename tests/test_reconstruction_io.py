@@ -114,6 +114,9 @@ def test_colour_bar_matches_the_picture_and_names_the_units():
     assert np.any(np.all(panel[-20:] == farthest, axis=-1))
     tiny = depth_legend_picture(np.full((4, 5), np.nan))  # no depth at all: still a picture, enlarged
     assert tiny.shape[0] >= 192 and np.all(tiny[:, :5 * tiny.shape[0] // 4] == 0)
+    large = depth_legend_picture(_depth((240, 320)), max_height=120)  # a camera-sized map: a picture to look at
+    assert large.shape[0] == 120 and large.shape[1] > 160
+    assert np.array_equal(large[:, :160].mean(axis=(0, 1)) > 0, mm[:, :320].mean(axis=(0, 1)) > 0)
 
 
 def test_view_depth_refuses_bad_depth_and_names_without_writing(tmp_path):

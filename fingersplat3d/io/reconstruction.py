@@ -98,17 +98,22 @@ def _label(value: float, decimals: int, units: str) -> str:
     return f"{value:.{decimals}f} {'mm' if units == 'mm' else 'units'}"
 
 
-def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int = 192) -> np.ndarray:
+def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int = 192,
+                         max_height: int = 2048) -> np.ndarray:
     """``depth_colormap`` of ``depth`` with a colour bar on the right labelled near/far in ``units``.
 
     RGB uint8. Pictures shorter than ``min_height`` pixels are enlarged (nearest neighbour) so
-    the labels stay readable; NaN pixels are black.
+    the labels stay readable, and pictures taller than ``max_height`` shrunk (area average: a picture to look at;
+    the depth itself is the .npy, and the 16-bit preview keeps the full grid); NaN pixels are black.
     """
     depth = np.asarray(depth, np.float64)
     picture = depth_colormap(depth)
     if picture.shape[0] < min_height:
         factor = math.ceil(min_height / picture.shape[0])
         picture = np.repeat(np.repeat(picture, factor, axis=0), factor, axis=1)
+    elif picture.shape[0] > max_height:
+        size = (max(1, round(picture.shape[1] * max_height / picture.shape[0])), max_height)
+        picture = cv2.resize(picture, size, interpolation=cv2.INTER_AREA)
     height = picture.shape[0]
     valid = np.isfinite(depth)
     margin = max(4, height // 40)
