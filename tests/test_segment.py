@@ -167,6 +167,7 @@ def test_a_finger_on_a_bright_or_cluttered_background():
         mask = finger_mask(bright)
         assert mask_iou(mask, view.mask) > 0.95
         assert np.array_equal(mask, finger_mask(bright))  # the same photo, the same mask
+        assert mask_iou(finger_mask(bright * 0.02), view.mask) > 0.95  # a dim exposure (16-bit, bottom of the range)
         cluttered = _on_background(view, _clutter(view.image.shape, rng))
         assert mask_iou(finger_mask(cluttered), view.mask) > 0.7
     plain = (0.8 + 0.02 * rng.normal(size=(256, 320, 3))).clip(0, 1).astype(np.float32)

@@ -136,6 +136,9 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     size = (max(1, round(width * factor)), max(1, round(height * factor)))
     small = cv2.resize(image, size, interpolation=cv2.INTER_AREA) if factor < 1.0 else image
     small = np.clip(np.asarray(small, np.float32), 0.0, 1.0)
+    top = float(np.percentile(small, 99.5))
+    if 0.0 < top < 0.5:  # a dim exposure (16-bit data using the bottom of its range): stretched before 8-bit GrabCut
+        small = np.clip(small / top, 0.0, 1.0)
     gray = _gray(small)
     ring_width = max(2, int(RING_SHARE * max(size)))
     colour = small if small.ndim == 3 else np.repeat(small[..., None], 3, axis=2)
