@@ -143,10 +143,10 @@ def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
 def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], maps: Sequence[list[np.ndarray] | None],
                    report: dict) -> tuple[list[Camera], list]:
     """Cameras and per-view maps of the working resolution put back on the photos' pixel grid."""
-    report["working_resolution"] = scale.as_report([(view.width, view.height) for view in photos.views])
+    sizes = [(view.width, view.height) for view in photos.views]
+    report["working_resolution"] = scale.as_report(sizes)
     if scale.factor == 1.0:
         return cameras, list(maps)
-    sizes = [(view.width, view.height) for view in photos.views]
     grow = [size[0] / camera.width for camera, size in zip(cameras, sizes)]
     cameras = [camera.resized(size) for camera, size in zip(cameras, sizes)]
     out = [None if views is None else [map_on_grid(values, size, view.mask)

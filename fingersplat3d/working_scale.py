@@ -104,22 +104,31 @@ class WorkingScale:
                 "ridge_px_asked": self.ridge_px, "sizes": [list(self.size(size)) for size in photo_sizes]}
 
 
-def _survey(view: View) -> tuple[float, np.ndarray]:
-    """(survey factor, finger mask at that factor) of one view; the photo's own mask when it has one."""
+@dataclass(frozen=True)
+class _Survey:
+    """One view's survey copy: its scale, its image and the finger mask on it (the photo's own when it has one)."""
+
+    factor: float
+    image: np.ndarray
+    mask: np.ndarray
+
+
+def _survey(view: View) -> _Survey:
     from .segment.masks import finger_mask
 
     factor = min(1.0, SURVEY_SIDE / max(view.width, view.height))
     size = scaled_size((view.width, view.height), factor)
+    image = _resized(view.image, size)
     if view.mask is not None:
-        return factor, resized_mask(view.mask, size)
-    return factor, finger_mask(_resized(view.image, size), name=f"view {view.name!r}")
+        return _Survey(factor, image, resized_mask(view.mask, size))
+    return _Survey(factor, image, finger_mask(image, name=f"view {view.name!r}"))
 
 
-def _photo_period(view: View, factor: float, mask: np.ndarray) -> float:
+def _photo_period(view: View, survey: _Survey) -> float:
     """The view's ridge period in photo pixels, from its survey copy or a photo-resolution crop of the finger;
     NaN when neither shows ridges."""
-    size = (mask.shape[1], mask.shape[0])
-    period = measure_ridge_period(_resized(view.image, size), mask)
+    factor, mask = survey.factor, survey.mask
+    period = measure_ridge_period(survey.image, mask)
     if factor == 1.0 or (period is not None and period >= FINE_BELOW_PX):
         return float("nan") if period is None else period / factor
     rows, cols = np.nonzero(mask)  # centre of the finger: its ridges, away from the rims
@@ -155,31 +164,32 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
     if ridge_px is not None and not (np.isfinite(ridge_px) and ridge_px > 0):
         raise InputError(f"pixels per ridge must be a positive number, got {ridge_px}")
     surveys = [_survey(view) for view in views]
-    for view, (_, mask) in zip(views, surveys):
-        if mask.sum() < 16:
-            raise InputError(f"view {view.name!r}: the finger mask has only {int(mask.sum())} pixels")
+    for view, survey in zip(views, surveys):
+        if survey.mask.sum() < 16:
+            raise InputError(f"view {view.name!r}: the finger mask has only {int(survey.mask.sum())} pixels")
     sizes = [(view.width, view.height) for view in views]
     period, periods = float("nan"), []  # not measured when nothing depends on it
     if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
-        periods = [_photo_period(view, f, mask) for view, (f, mask) in zip(views, surveys)]
+        periods = [_photo_period(view, survey) for view, survey in zip(views, surveys)]
         period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
     factor = _factor(period, ridge_px, sizes) if factor is None else factor
     scale = WorkingScale(float(factor), period, ridge_px, tuple(float(p) for p in periods),
-                         all(f == 1.0 for f, _ in surveys))
+                         all(survey.factor == 1.0 for survey in surveys))
     photo, working = [], []
-    for view, (survey_factor, survey_mask) in zip(views, surveys):
+    for view, survey in zip(views, surveys):
         size = scale.size((view.width, view.height))
-        image = _resized(view.image, size)
+        same = size == (survey.image.shape[1], survey.image.shape[0])  # the survey copy is the working one
+        image = survey.image if same else _resized(view.image, size)
         if view.mask is not None:
             mask = resized_mask(view.mask, size)
-        elif scale.factor > survey_factor and max(size) <= MASK_SIDE_MAX:
+        elif scale.factor > survey.factor and max(size) <= MASK_SIDE_MAX:
             from .segment.masks import finger_mask
 
             mask = finger_mask(image, name=f"view {view.name!r}")
         else:
-            mask = resized_mask(survey_mask, size)
+            mask = resized_mask(survey.mask, size)
         photo_mask = view.mask if view.mask is not None else resized_mask(
-            mask if scale.factor >= survey_factor else survey_mask, (view.width, view.height))
+            mask if scale.factor >= survey.factor else survey.mask, (view.width, view.height))
         photo.append(view.with_(mask=photo_mask))
         working.append(photo[-1] if scale.factor == 1.0 else View(view.name, image, mask))
     return photo, working, scale

@@ -93,29 +93,40 @@ def _to_border(finger: np.ndarray, width: int) -> np.ndarray:
     return out
 
 
-def _pad(evidence: np.ndarray) -> np.ndarray | None:
-    """The largest area of ridges (lines, the edges of other things, dropped by an opening), or None."""
-    ridged = cv2.morphologyEx((evidence > RIDGE_LEVEL).view(np.uint8), cv2.MORPH_OPEN,
+def _largest_ridge_area(ridged: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """The largest area of ``ridged`` pixels once an opening has dropped lines (the edges of other things), and its
+    size; None when nothing is left."""
+    opened = cv2.morphologyEx(ridged.view(np.uint8), cv2.MORPH_OPEN,
                               cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEED_RADIUS + 1,) * 2))
-    count, blobs, stats, _ = cv2.connectedComponentsWithStats(ridged, connectivity=8)
+    count, blobs, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
     if count < 2:
         return None
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    return blobs == largest, int(stats[largest, cv2.CC_STAT_AREA])
+
+
+def _colour_distance(colour: np.ndarray, seed: np.ndarray, floor: float) -> np.ndarray:
+    """Per pixel, the distance of ``colour`` from the mean colour of the ``seed`` pixels, in their standard deviations
+    per channel (``floor`` added to each, so that a flat seed does not make every other colour infinitely far)."""
+    skin = colour[seed].astype(np.float32)
+    return np.linalg.norm((colour - skin.mean(0)) / (skin.std(0) + floor), axis=-1)
+
+
+def _pad(evidence: np.ndarray) -> np.ndarray | None:
+    """The largest area of ridges, or None when it is too small to be a finger's."""
+    found = _largest_ridge_area(evidence > RIDGE_LEVEL)
     enough = max(MIN_RIDGE_SHARE * evidence.size, MIN_RIDGE_AREA_PX)
-    return blobs == largest if stats[largest, cv2.CC_STAT_AREA] >= enough else None
+    return found[0] if found is not None and found[1] >= enough else None
 
 
 def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, ring_width: int) -> np.ndarray:
     """A second GrabCut, now told what the finger is (its ridged area) and what it is not (everything outside the
     piece): background stuff that first went along with the finger (it was not in the border ring) falls away."""
-    ridged = cv2.morphologyEx(((evidence > RIDGE_LEVEL) & piece).view(np.uint8), cv2.MORPH_OPEN,
-                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEED_RADIUS + 1,) * 2))
-    count, blobs, stats, _ = cv2.connectedComponentsWithStats(ridged, connectivity=8)
-    if count < 2:
+    found = _largest_ridge_area((evidence > RIDGE_LEVEL) & piece)  # the pad: one area of ridges, not lines
+    if found is None:
         return piece
-    ridged = blobs == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))  # the pad: one area of ridges, not lines
-    skin = colour8[ridged].astype(np.float32)
-    distance = np.linalg.norm((colour8 - skin.mean(0)) / (skin.std(0) + 5.0), axis=-1)
+    ridged = found[0]
+    distance = _colour_distance(colour8, ridged, 5.0)  # 8-bit levels: 5 is the 0.02 of the first cut
     labels = np.where(piece & (distance < PIECE_SKIN_DISTANCE), cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
     labels[~piece] = cv2.GC_BGD
     labels[_ring(piece.shape, ring_width)] = cv2.GC_BGD
@@ -148,9 +159,7 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     ring = _ring(gray.shape, ring_width)
     labels = np.where(ring, cv2.GC_BGD, cv2.GC_PR_FGD).astype(np.uint8)
     if pad is not None:  # skin where the finger enters the frame is not sure background; the pad is sure finger
-        skin = colour[pad]
-        distance = np.linalg.norm((colour - skin.mean(0)) / (skin.std(0) + 0.02), axis=-1)
-        labels[ring & (distance < SKIN_DISTANCE)] = cv2.GC_PR_BGD
+        labels[ring & (_colour_distance(colour, pad, 0.02) < SKIN_DISTANCE)] = cv2.GC_PR_BGD
         labels[pad] = cv2.GC_FGD
     cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
     background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
