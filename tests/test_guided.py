@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from fingersplat3d.align.correspond.guided import match_guided, predict_with_jacobian, structure_information
+from fingersplat3d.align.correspond.guided import RidgeMaps, match_guided, predict_with_jacobian, structure_information
 from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 
 LINEAR = np.array([[0.9, 0.15], [-0.1, 0.8]])
@@ -37,7 +37,7 @@ def test_jacobian_of_an_affine_predictor_is_its_linear_part():
 @pytest.mark.parametrize("offset, tolerance", [((0.0, 0.0), 0.05), ((3.0, -4.0), 0.5)])
 def test_known_warp_is_recovered(textures, offset, tolerance):
     texture, mask, warped, warped_mask, period = textures
-    matches = match_guided(texture, mask, warped, warped_mask, affine(offset), period, search=0.7 * period)
+    matches = match_guided(RidgeMaps(texture, mask), RidgeMaps(warped, warped_mask), affine(offset), period, search=0.7 * period)
     assert len(matches) > 100
     truth = matches.uv_a @ LINEAR.T + OFFSET
     assert np.median(np.linalg.norm(matches.uv_b - truth, axis=1)) < tolerance
@@ -45,7 +45,7 @@ def test_known_warp_is_recovered(textures, offset, tolerance):
 
 def test_information_is_normalised_across_the_ridges_and_mapped_into_b(textures):
     texture, mask, warped, warped_mask, period = textures
-    matches = match_guided(texture, mask, warped, warped_mask, affine(), period, search=0.7 * period)
+    matches = match_guided(RidgeMaps(texture, mask), RidgeMaps(warped, warped_mask), affine(), period, search=0.7 * period)
     eigen = np.linalg.eigvalsh(matches.information_a)
     assert np.allclose(eigen[:, 1], 1.0 + 1e-3, atol=1e-6) and np.all(eigen[:, 0] > 0)
     inverse = np.linalg.inv(LINEAR)
@@ -62,4 +62,4 @@ def test_a_one_dimensional_texture_is_informative_across_its_stripes_only():
 def test_nothing_visible_gives_no_matches(textures):
     texture, mask, warped, warped_mask, period = textures
     hidden = lambda uv: (uv @ LINEAR.T + OFFSET, np.zeros(len(uv), bool))  # noqa: E731
-    assert len(match_guided(texture, mask, warped, warped_mask, hidden, period, search=period)) == 0
+    assert len(match_guided(RidgeMaps(texture, mask), RidgeMaps(warped, warped_mask), hidden, period, search=period)) == 0

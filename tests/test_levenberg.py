@@ -122,3 +122,52 @@ def test_the_solved_turns_keep_to_their_bounds(capture):
         rotations = problem.rotations().numpy()
     assert rotation_angle_deg(rotations[0], rotations[1]) > 51.5
     assert rotation_angle_deg(rotations[1], rotations[2]) > 35.0  # measured 40-50: its neighbour pulls, not its bound
+
+
+def _autodiff_row_derivatives(problem, local):
+    """The slow reference: forward-mode products of :meth:`AlignmentProblem.row_residuals`, one per local unknown."""
+    from fingersplat3d.align.solve.row_jacobian import ROW_UNKNOWNS
+
+    names = [name for name, _ in ROW_UNKNOWNS]
+    columns = []
+    for name, width in ROW_UNKNOWNS:
+        for k in range(width):
+            tangent = tuple(torch.zeros_like(local[n]) for n in names)
+            tangent[names.index(name)][:, k] = 1.0
+            columns.append(torch.func.jvp(lambda *args: problem.row_residuals(**dict(zip(names, args))),
+                                          tuple(local[n] for n in names), tangent)[1])
+    return torch.stack(columns, 2)  # [M, 4, 20]
+
+
+@pytest.mark.gradcheck
+@pytest.mark.parametrize("omega_scale", [0.0, 1e-6, 0.3])
+def test_closed_form_row_derivatives_equal_autodiff(capture, omega_scale):
+    """Every per-correspondence derivative, rotation updates at zero, tiny (the series branch) and large."""
+    from fingersplat3d.align.solve.row_jacobian import row_residuals_and_derivatives
+
+    problem, *_ = _problem(capture, GlobalAlignConfig(shared_relief=False, shared_focal=False), noise_px=2.0)
+    with torch.no_grad():
+        problem.omega.copy_(torch.as_tensor(np.random.default_rng(3).normal(0, 1, problem.omega.shape)) * omega_scale)
+    local = problem.row_unknowns()
+    rows, derivatives = row_residuals_and_derivatives(problem, local)
+    with torch.no_grad():
+        expected_rows = problem.row_residuals(**local)
+    expected = _autodiff_row_derivatives(problem, local)
+    assert rows.shape == expected_rows.shape and derivatives.shape == expected.shape == (rows.shape[0], 4, 20)
+    assert torch.allclose(rows, expected_rows, rtol=1e-10, atol=1e-10)
+    assert torch.allclose(derivatives, expected, rtol=1e-7, atol=1e-9 * float(expected.abs().max()))
+
+
+def test_left_jacobian_is_the_exponential_maps_first_order():
+    """``Exp(w + d) ~ Exp(J_l(w) d) Exp(w)`` to second order in ``d``, on both sides of the series switch."""
+    from fingersplat3d.align.solve.row_jacobian import left_jacobian
+    from fingersplat3d.rotations import axis_angle_to_matrix
+
+    rng = np.random.default_rng(0)
+    for norm in (0.0, 5e-5, 1e-3, 1.0, 3.0):
+        w = torch.as_tensor(rng.normal(size=3), dtype=torch.float64)
+        w = w / w.norm() * norm
+        d = torch.as_tensor(rng.normal(size=3), dtype=torch.float64) * 1e-6
+        moved = axis_angle_to_matrix(w + d)
+        predicted = axis_angle_to_matrix(left_jacobian(w) @ d) @ axis_angle_to_matrix(w)
+        assert torch.allclose(moved, predicted, atol=1e-11)

@@ -8,6 +8,7 @@ import torch
 
 from fingersplat3d.scene import Camera, View, look_at
 from fingersplat3d.splat import Gaussians, rgb_to_sh
+from fingersplat3d.splat.adam import Adam
 from fingersplat3d.splat.config import PRESETS, SplatConfig, differences_from_preset, preset
 from fingersplat3d.splat.fit import fit_camera, fit_gaussians, gaussian_budget, render_camera
 from fingersplat3d.splat.strategy import GAUSSIAN_GROUPS, GradientStats, densify_and_prune, gaussians_of
@@ -97,7 +98,7 @@ def test_fit_recovers_a_known_scene_from_a_perturbed_start():
 def test_density_control_respects_budget_and_keeps_adam_state():
     model = _plane_scene(n_side=10)
     parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
-    optimizer = torch.optim.Adam([{"params": [p], "lr": 1e-3, "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
+    optimizer = Adam([{"params": [p], "lr": 1e-3, "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
     sum(p.sum() for p in parameters).backward()
     optimizer.step()
     n = len(model)
@@ -121,7 +122,7 @@ def test_density_control_respects_budget_and_keeps_adam_state():
 def test_split_children_are_smaller_and_inside_the_parent():
     model = _plane_scene(n_side=4)
     parameters = [torch.nn.Parameter(t.clone()) for t in model.tensors()]
-    optimizer = torch.optim.Adam([{"params": [p], "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
+    optimizer = Adam([{"params": [p], "lr": 1e-3, "name": name} for p, name in zip(parameters, GAUSSIAN_GROUPS)])
     stats = GradientStats.zeros(len(model), torch.device("cpu"))
     stats.add(torch.ones(len(model), 2), torch.ones(len(model), dtype=torch.int32), 64, 48)
     result = densify_and_prune(optimizer, stats, SplatConfig(percent_dense=0.0), extent=10.0, budget=100,
@@ -198,3 +199,25 @@ def test_test_view_alignment_never_ends_worse_than_it_starts():
         return float((out.color[..., 0] - torch.from_numpy(views[1].image).float()).abs().mean())
 
     assert loss(aligned) <= loss(cameras[1]) + 1e-6
+
+
+def test_adam_follows_torch_adam():
+    """The fit's Adam (no torch._dynamo import) takes torch.optim.Adam's steps: several groups and rates, a tiny
+    ``eps`` as the fit uses, gradients that vanish on some entries, a parameter with no gradient."""
+    rng = np.random.default_rng(0)
+    start = [torch.as_tensor(rng.normal(size=shape), dtype=torch.float32) for shape in ((50, 3), (50,), (4, 3))]
+    ours = [torch.nn.Parameter(t.clone()) for t in start]
+    theirs = [torch.nn.Parameter(t.clone()) for t in start]
+    rates = (1e-2, 3e-3, 0.0)
+    mine = Adam([{"params": [p], "lr": lr, "name": str(i)} for i, (p, lr) in enumerate(zip(ours, rates))], eps=1e-15)
+    reference = torch.optim.Adam([{"params": [p], "lr": lr} for p, lr in zip(theirs, rates)], eps=1e-15)
+    for step in range(30):
+        for parameters, optimizer in ((ours, mine), (theirs, reference)):
+            optimizer.zero_grad(set_to_none=True)
+            loss = (parameters[0] ** 3).sum() + (torch.relu(parameters[1]) * step).sum()  # parameters[2]: no gradient
+            loss.backward()
+            optimizer.step()
+    for a, b in zip(ours, theirs):
+        assert torch.allclose(a, b, rtol=1e-5, atol=1e-6)
+    assert not torch.equal(ours[0], start[0]) and torch.equal(ours[2], start[2])
+    assert mine.state[ours[0]]["step"] == 30 and ours[2] not in mine.state

@@ -37,7 +37,7 @@ from .correspond.chart import CylinderChart
 from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
 from .correspond.contours import contour_correspondences
 from .correspond.epipolar import fundamental_inliers
-from .correspond.guided import GuidedMatches, match_guided
+from .correspond.guided import GuidedMatches, RidgeMaps, match_guided
 from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
@@ -122,6 +122,11 @@ class _Prepared:
         guided round and view pair read them)."""
         return [silhouette_frame(mask) for mask in self.masks]
 
+    @cached_property
+    def maps(self) -> list[RidgeMaps]:
+        """Each view as guided matching reads it, with its derived maps kept across pairs and rounds."""
+        return [RidgeMaps(texture, mask) for texture, mask in zip(self.textures, self.masks)]
+
 
 def _prepare(views: Sequence[View], period_px: float | None = None) -> _Prepared:
     grays = [as_gray(view.image, f"view {view.name!r}") for view in views]
@@ -150,8 +155,7 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
                             f"patches at the best one, {shift.ratio:.2f} times the runner-up)")
         return GuidedMatches.empty()
     predictor = ChartPredictor(charts[a], charts[b], shift)
-    return match_guided(prepared.textures[a], prepared.masks[a], prepared.textures[b], prepared.masks[b], predictor,
-                        prepared.period, config.first_search * prepared.period)
+    return match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period, config.first_search * prepared.period)
 
 
 def _classic_guess(prepared: _Prepared, a: int, b: int, config: RegistrationConfig) -> GuidedMatches:
@@ -257,8 +261,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                 continue
             say(f"guided round {rounds} {views[a].name}-{views[b].name}")
             predictor = ModelPredictor.from_alignment(alignment, a, b)
-            matches = match_guided(prepared.textures[a], prepared.masks[a], prepared.textures[b], prepared.masks[b],
-                                   predictor, prepared.period, config.guided_search * prepared.period)
+            matches = match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period, config.guided_search * prepared.period)
             verified = _verified(matches, prepared.period, config)
             record = records[(a, b)]
             record["matches"].append(len(verified))

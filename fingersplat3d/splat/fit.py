@@ -21,6 +21,7 @@ import torch
 
 from ..device import resolve_device
 from ..scene import Camera, View
+from .adam import Adam
 from .config import SplatConfig
 from .gaussians import Gaussians, sh_to_rgb
 from .losses import photometric_loss
@@ -153,7 +154,7 @@ def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: in
     groups += [{"params": [rotation], "lr": config.lr_pose_rotation if config.refine_poses else 0.0, "name": "pose_rotation"},
                {"params": [translation], "lr": config.lr_pose_translation * extent if config.refine_poses else 0.0,
                 "name": "pose_translation"}]
-    return torch.optim.Adam(groups, eps=1e-15), rotation, translation
+    return Adam(groups, eps=1e-15), rotation, translation
 
 
 def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[Camera],
@@ -249,7 +250,7 @@ def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np
     blurred_target = _blur(target.image, sigma)
     rotation = torch.zeros(3, device=device, requires_grad=True)
     translation = torch.zeros(3, device=device, requires_grad=True)
-    optimizer = torch.optim.Adam([{"params": [rotation], "lr": lr_rotation, "name": "pose_rotation"},
+    optimizer = Adam([{"params": [rotation], "lr": lr_rotation, "name": "pose_rotation"},
                                   {"params": [translation], "lr": lr_translation * extent, "name": "pose_translation"}])
     best_loss, best = float("inf"), (torch.zeros(3, device=device), torch.zeros(3, device=device))
     for step in range(iterations + 1):

@@ -1,6 +1,6 @@
 """Adaptive density control (3DGS): clone, split and prune Gaussians under a budget.
 
-The optimised parameters live in one Adam optimiser, one parameter group per Gaussian field,
+The optimised parameters live in one Adam optimiser (:class:`~fingersplat3d.splat.adam.Adam`), one parameter group per Gaussian field,
 addressed by name (``GAUSSIAN_GROUPS``, the order of :meth:`Gaussians.tensors`); growing or shrinking the model edits the groups' tensors and
 their Adam moments together (:func:`replace_rows`), so the optimiser keeps its state for the
 Gaussians that stay. Statistics are the mean norm of the view-space positional gradient (in NDC
@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
+from .adam import Adam
 from .config import SplatConfig
 from .gaussians import Gaussians
 from ..rotations import quaternion_to_matrix
@@ -54,7 +55,7 @@ GAUSSIAN_GROUPS = ("means", "quats", "log_scales", "opacity", "sh_dc")
 """Names of the optimiser's parameter groups that hold the Gaussians, in :meth:`Gaussians.tensors` order."""
 
 
-def param_group(optimizer: torch.optim.Optimizer, name: str) -> dict:
+def param_group(optimizer: Adam, name: str) -> dict:
     """The optimiser's parameter group called ``name`` (a ``KeyError`` naming the groups when none is)."""
     for group in optimizer.param_groups:
         if group.get("name") == name:
@@ -62,16 +63,16 @@ def param_group(optimizer: torch.optim.Optimizer, name: str) -> dict:
     raise KeyError(f"no parameter group {name!r}; the optimiser has {[g.get('name') for g in optimizer.param_groups]}")
 
 
-def _gaussian_groups(optimizer: torch.optim.Optimizer) -> list[dict]:
+def _gaussian_groups(optimizer: Adam) -> list[dict]:
     return [param_group(optimizer, name) for name in GAUSSIAN_GROUPS]
 
 
-def gaussians_of(optimizer: torch.optim.Optimizer) -> Gaussians:
+def gaussians_of(optimizer: Adam) -> Gaussians:
     """The model whose fields are the optimiser's parameter groups (see module docstring)."""
     return Gaussians(*(group["params"][0] for group in _gaussian_groups(optimizer)))
 
 
-def replace_rows(optimizer: torch.optim.Optimizer, keep: torch.Tensor, new_rows: tuple[torch.Tensor, ...]) -> None:
+def replace_rows(optimizer: Adam, keep: torch.Tensor, new_rows: tuple[torch.Tensor, ...]) -> None:
     """Keep rows ``keep`` (bool [N]) of every Gaussian group and append ``new_rows`` (one tensor per
     group); Adam moments of kept rows are kept, those of new rows start at zero."""
     for group, extra in zip(_gaussian_groups(optimizer), new_rows):
@@ -87,7 +88,7 @@ def replace_rows(optimizer: torch.optim.Optimizer, keep: torch.Tensor, new_rows:
         group["params"][0] = parameter
 
 
-def densify_and_prune(optimizer: torch.optim.Optimizer, stats: GradientStats, config: SplatConfig,
+def densify_and_prune(optimizer: Adam, stats: GradientStats, config: SplatConfig,
                       extent: float, budget: int, generator: torch.Generator, densify: bool = True) -> DensifyStats:
     """One adaptive-density pass: clone small / split large high-gradient Gaussians (within
     ``budget``), then prune transparent, huge or non-finite ones."""

@@ -29,7 +29,7 @@ import numpy as np
 
 from ...device import cpu_threads, single_threaded
 
-__all__ = ["GuidedMatches", "Predictor", "predict_with_jacobian", "match_guided", "structure_information"]
+__all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_jacobian", "match_guided", "structure_information"]
 
 Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``uv_a [N, 2] -> (uv_b [N, 2], seen_in_b [N] bool)``."""
@@ -81,22 +81,56 @@ def predict_with_jacobian(predictor: Predictor, uv: np.ndarray, step: float = 1.
     return centre, jacobian, seen & finite
 
 
-def structure_information(texture: np.ndarray, uv: np.ndarray, half: int) -> np.ndarray:
-    """``[N, 2, 2]`` structure tensors of ``texture`` at ``uv`` (Gaussian window of ``half / 2``), 1 across the ridges."""
+def _structure_products(texture: np.ndarray, half: int) -> np.ndarray:
+    """``[H, W, 3]`` the gradient products ``(uu, uv, vv)`` of ``texture``, each blurred by a Gaussian of ``half / 2``."""
     grad_v, grad_u = np.gradient(np.asarray(texture, np.float32))
     sigma = max(1.0, half / 2.0)
-    blur = [cv2.GaussianBlur(product, (0, 0), sigma) for product in (grad_u * grad_u, grad_u * grad_v, grad_v * grad_v)]
-    u = np.clip(np.round(uv[:, 0]).astype(int), 0, texture.shape[1] - 1)
-    v = np.clip(np.round(uv[:, 1]).astype(int), 0, texture.shape[0] - 1)
-    xx, xy, yy = (b[v, u].astype(np.float64) for b in blur)
+    return np.stack([cv2.GaussianBlur(product, (0, 0), sigma) for product in (grad_u * grad_u, grad_u * grad_v, grad_v * grad_v)], -1)
+
+
+def _sampled_information(products: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    u = np.clip(np.round(uv[:, 0]).astype(int), 0, products.shape[1] - 1)
+    v = np.clip(np.round(uv[:, 1]).astype(int), 0, products.shape[0] - 1)
+    xx, xy, yy = products[v, u].astype(np.float64).T
     tensor = np.stack([np.stack([xx, xy], -1), np.stack([xy, yy], -1)], -2)
     largest = np.linalg.eigvalsh(tensor)[:, 1]
     return tensor / np.maximum(largest, 1e-30)[:, None, None] + _FLOOR * np.eye(2)
 
 
-def _grid(mask: np.ndarray, half: int, stride: float) -> np.ndarray:
-    inner = cv2.erode(mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * half + 1,) * 2)) > 0
-    rows, cols = np.mgrid[half:mask.shape[0] - half:stride, half:mask.shape[1] - half:stride]
+def structure_information(texture: np.ndarray, uv: np.ndarray, half: int) -> np.ndarray:
+    """``[N, 2, 2]`` structure tensors of ``texture`` at ``uv`` (Gaussian window of ``half / 2``), 1 across the ridges."""
+    return _sampled_information(_structure_products(texture, half), uv)
+
+
+class RidgeMaps:
+    """One view as guided matching reads it: its ridge texture (float32) and finger mask, with the maps derived from
+    them (eroded masks, blurred structure products) made once per size and kept: every pair and round of a
+    registration reads the same few (they were a third of the matching's time when remade per call)."""
+
+    def __init__(self, texture: np.ndarray, mask: np.ndarray) -> None:
+        self.texture = np.asarray(texture, np.float32)
+        self.mask = np.asarray(mask, bool)
+        self._derived: dict = {}
+
+    def inner(self, size: int) -> np.ndarray:
+        """The mask eroded by an elliptic (disc) structuring element ``size`` pixels across."""
+        key = ("inner", size)
+        if key not in self._derived:
+            element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+            self._derived[key] = cv2.erode(self.mask.astype(np.uint8), element) > 0
+        return self._derived[key]
+
+    def information(self, uv: np.ndarray, half: int) -> np.ndarray:
+        """:func:`structure_information` of the texture at ``uv``."""
+        key = ("structure", half)
+        if key not in self._derived:
+            self._derived[key] = _structure_products(self.texture, half)
+        return _sampled_information(self._derived[key], uv)
+
+
+def _grid(maps: RidgeMaps, half: int, stride: float) -> np.ndarray:
+    inner = maps.inner(2 * half + 1)
+    rows, cols = np.mgrid[half:inner.shape[0] - half:stride, half:inner.shape[1] - half:stride]
     grid = np.stack([cols.ravel(), rows.ravel()], 1).astype(np.float64)
     return grid[inner[grid[:, 1].astype(int), grid[:, 0].astype(int)]]
 
@@ -128,31 +162,29 @@ def _match_one(texture_a, texture_b, point, prediction, jacobian, half, search, 
     return prediction + jacobian @ offset, float(best), float(best - others.max())
 
 
-def match_guided(texture_a: np.ndarray, mask_a: np.ndarray, texture_b: np.ndarray, mask_b: np.ndarray,
-                 predictor: Predictor, period: float, search: float, *, stride: float | None = None,
+def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, period: float, search: float, *, stride: float | None = None,
                  min_score: float = MIN_SCORE, min_uniqueness: float = MIN_UNIQUENESS) -> GuidedMatches:
     """Matches of a grid of ``a`` (every ``stride`` pixels, default one period) searched ``search`` px around the predictions.
 
-    ``texture_*`` are ridge textures (:func:`fingersplat3d.align.texture.ridge_texture`) and
-    ``mask_*`` the finger masks; a point is tried when its patch lies on the finger in a and its
+    ``maps_*`` hold the ridge textures (:func:`fingersplat3d.align.texture.ridge_texture`) and the
+    finger masks; a point is tried when its patch lies on the finger in a and its
     prediction, seen by b, lies on the finger in b with a non-degenerate local map.
     """
     half = max(3, int(round(PATCH_PERIODS * period)))
     search = max(1, int(round(search)))
-    grid = _grid(mask_a, half, stride or period)
+    grid = _grid(maps_a, half, stride or period)
     if len(grid) == 0:
         return GuidedMatches.empty()
     prediction, jacobian, seen = predict_with_jacobian(predictor, grid)
-    inner_b = cv2.erode(mask_b.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (half | 1,) * 2)) > 0
-    height, width = mask_b.shape
+    inner_b = maps_b.inner(half | 1)
+    height, width = inner_b.shape
     inside = seen & (prediction[:, 0] >= 0) & (prediction[:, 1] >= 0) & (prediction[:, 0] <= width - 1) & (prediction[:, 1] <= height - 1)
     inside[inside] &= inner_b[np.round(prediction[inside, 1]).astype(int), np.round(prediction[inside, 0]).astype(int)]
     determinant = np.linalg.det(np.where(np.isfinite(jacobian), jacobian, 0.0))
     inside &= (determinant > 0.05) & (determinant < 20.0)
     index = np.flatnonzero(inside)
     exclusion = max(2, int(round(0.6 * period)))
-    texture_a = np.asarray(texture_a, np.float32)
-    texture_b = np.asarray(texture_b, np.float32)
+    texture_a, texture_b = maps_a.texture, maps_b.texture
     # Patches in parallel on the process's threads (OpenCV releases the GIL), OpenCV itself on one each.
     with single_threaded(), ThreadPoolExecutor(cpu_threads()) as pool:
         results = list(pool.map(lambda i: _match_one(texture_a, texture_b, grid[i], prediction[i], jacobian[i], half,
@@ -162,7 +194,7 @@ def match_guided(texture_a: np.ndarray, mask_a: np.ndarray, texture_b: np.ndarra
     uniqueness = np.array([r[2] for r in results])
     keep = np.isfinite(uv_b).all(1) & (score >= min_score) & (uniqueness >= min_uniqueness)
     uv_a, uv_b, score, J = grid[index][keep], uv_b[keep], score[keep], jacobian[index][keep]
-    information_a = structure_information(texture_a, uv_a, half)
+    information_a = maps_a.information(uv_a, half)
     J_inv = np.linalg.inv(J)
     information_b = np.einsum("nji,njk,nkl->nil", J_inv, information_a, J_inv)
     return GuidedMatches(uv_a, uv_b, score, information_a, information_b)

@@ -8,8 +8,8 @@ the fuse could afford. A Gauss-Newton step solves the whole quadratic model at o
 
 Each correspondence's four whitened residuals (a->b and b->a, two pixels each) depend on the two
 views' poses, scales, relief, focal and on one field value per end, which is a fixed combination of
-16 field coefficients. So the Jacobian is built from 20 per-row derivatives (forward-mode products
-of :meth:`AlignmentProblem.row_residuals`, one per local unknown) scattered into a sparse matrix,
+16 field coefficients. So the Jacobian is built from 20 per-row derivatives (in closed form,
+:mod:`~fingersplat3d.align.solve.row_jacobian`, one per local unknown) scattered into a sparse matrix,
 plus the priors' rows (linear in the unknowns, or nearly). The Cauchy loss is handled by iteratively
 reweighted least squares: each residual scaled by ``sqrt(w / (c^2 + e))``, so the step's gradient
 is the true loss's. Steps are accepted only if the true loss (:meth:`AlignmentProblem.forward`)
@@ -21,41 +21,34 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
+from .row_jacobian import ROW_UNKNOWNS, row_residuals_and_derivatives
+
 __all__ = ["levenberg_marquardt", "damped_least_squares", "turn_uncertainty_deg"]
 
 
 def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     """IRLS-weighted residual vector and its Jacobian over ``problem.unknowns()``'s flat layout."""
     local = problem.row_unknowns()  # name -> [M, k] tensors, the values each row reads
-    names = list(local)
-    with torch.no_grad():
-        rows = problem.row_residuals(**local)  # [M, 4] whitened
+    rows, derivatives = row_residuals_and_derivatives(problem, local)  # [M, 4] whitened, [M, 4, 20]
     columns = problem.row_columns()  # name -> ([M, k, C] column indices, -1 where fixed; [M, k, C] weights)
     e = torch.stack([(rows[:, :2] ** 2).sum(1), (rows[:, 2:] ** 2).sum(1)], 1)  # [M, 2]
     irls = torch.sqrt(problem.weight[:, None] / (problem.robust_px ** 2 + e))  # [M, 2]
     scale = irls.repeat_interleave(2, dim=1)  # [M, 4]
     residual = (rows * scale).reshape(-1).numpy()
+    derivatives = (derivatives * scale[:, :, None]).numpy()
     count = rows.shape[0]
-    # One forward-mode pass per local unknown, all batched: tangent j is 1 in one column of one input.
-    slots = [(name, k) for name in names for k in range(local[name].shape[1])]
-    tangents = {name: torch.zeros((len(slots), *local[name].shape), dtype=local[name].dtype) for name in names}
-    for j, (name, k) in enumerate(slots):
-        tangents[name][j, :, k] = 1.0
-    primals = tuple(local[n] for n in names)
-
-    def derivative(*tangent):
-        return torch.func.jvp(lambda *args: problem.row_residuals(**dict(zip(names, args))), primals, tangent)[1]
-
-    derivatives = (torch.func.vmap(derivative)(*(tangents[n] for n in names)) * scale).numpy()  # [slots, M, 4]
     data_rows, data_cols, data_vals = [], [], []
     row_index = np.arange(4 * count).reshape(count, 4)
-    for j, (name, k) in enumerate(slots):
-        c, w = columns[name][0][:, k, :], columns[name][1][:, k, :]  # [M, C]
-        vals = derivatives[j][:, :, None] * w[:, None, :]  # [M, 4, C]
-        mask = np.broadcast_to((c >= 0)[:, None, :], vals.shape)
-        data_rows.append(np.broadcast_to(row_index[:, :, None], vals.shape)[mask])
-        data_cols.append(np.broadcast_to(c[:, None, :], vals.shape)[mask])
-        data_vals.append(vals[mask])
+    slot = 0
+    for name, width in ROW_UNKNOWNS:
+        for k in range(width):
+            c, w = columns[name][0][:, k, :], columns[name][1][:, k, :]  # [M, C]
+            vals = derivatives[:, :, slot, None] * w[:, None, :]  # [M, 4, C]
+            mask = np.broadcast_to((c >= 0)[:, None, :], vals.shape)
+            data_rows.append(np.broadcast_to(row_index[:, :, None], vals.shape)[mask])
+            data_cols.append(np.broadcast_to(c[:, None, :], vals.shape)[mask])
+            data_vals.append(vals[mask])
+            slot += 1
     prior_residual, prior_jacobian = problem.prior_system()
     size = problem.unknowns().numel()
     jacobian = sparse.coo_matrix((np.concatenate(data_vals), (np.concatenate(data_rows), np.concatenate(data_cols))),
