@@ -20,11 +20,13 @@ guided matching, which predicts them through the 3D model.
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from ...device import cpu_threads, single_threaded
 from .chart import MAX_CHART_ANGLE, CylinderChart, Unwrapped
 
 __all__ = ["ChartShift", "estimate_chart_shift", "ChartPredictor"]
@@ -69,23 +71,27 @@ class ChartShift:
 def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.ndarray:
     """``[K, 3]`` (row offset a-b, column offset a-b, correlation) of the patches of a that correlate."""
     rows, cols = a.image.shape
-    votes = []
-    valid_b = b.valid.astype(np.float32)
-    for y in range(half, rows - half, half):
-        for x in range(half, cols - half, half):
-            if a.valid[y - half:y + half, x - half:x + half].mean() < _VALID_PATCH:
-                continue
-            left, right = max(0, x - half - max_shift), min(b.image.shape[1], x + half + max_shift)
-            if right - left < 2 * half + 1:
-                continue
-            template = a.image[y - half:y + half, x - half:x + half]
-            score = cv2.matchTemplate(b.image[:, left:right], template, cv2.TM_CCOEFF_NORMED)
-            coverage = cv2.boxFilter(valid_b[:, left:right], -1, (2 * half, 2 * half), normalize=True,
-                                     anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)[:score.shape[0], :score.shape[1]]
-            score[coverage < _VALID_TARGET] = -1.0
-            _, best, _, (px, py) = cv2.minMaxLoc(score)
-            if best >= MIN_PATCH_NCC:
-                votes.append((y - (py + half), x - (left + px + half), best))
+    # Share of b's finger under a patch placed with its corner at each pixel (a patch of b that runs
+    # past b's right or bottom edge is never scored, so one filter of the whole image serves all).
+    coverage = cv2.boxFilter(b.valid.astype(np.float32), -1, (2 * half, 2 * half), normalize=True, anchor=(0, 0),
+                             borderType=cv2.BORDER_CONSTANT)
+    centres = [(y, x) for y in range(half, rows - half, half) for x in range(half, cols - half, half)
+               if a.valid[y - half:y + half, x - half:x + half].mean() >= _VALID_PATCH]
+
+    def vote(centre: tuple[int, int]) -> tuple[float, float, float] | None:
+        y, x = centre
+        left, right = max(0, x - half - max_shift), min(b.image.shape[1], x + half + max_shift)
+        if right - left < 2 * half + 1:
+            return None
+        template = a.image[y - half:y + half, x - half:x + half]
+        score = cv2.matchTemplate(b.image[:, left:right], template, cv2.TM_CCOEFF_NORMED)
+        score[coverage[:score.shape[0], left:left + score.shape[1]] < _VALID_TARGET] = -1.0
+        _, best, _, (px, py) = cv2.minMaxLoc(score)
+        return (y - (py + half), x - (left + px + half), best) if best >= MIN_PATCH_NCC else None
+
+    # Patches in parallel on the process's threads (OpenCV releases the GIL), OpenCV itself on one each.
+    with single_threaded(), ThreadPoolExecutor(cpu_threads()) as pool:
+        votes = [v for v in pool.map(vote, centres) if v is not None]
     return np.asarray(votes, np.float64).reshape(-1, 3)
 
 
