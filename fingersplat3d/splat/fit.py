@@ -46,6 +46,8 @@ class FitTarget:
     depth: torch.Tensor | None = None  # [H, W] prior depth (NaN = none), relative to its median
     depth_valid: torch.Tensor | None = None  # [H, W] bool: mask & finite prior depth
     depth_scale: float = 1.0  # median of the prior depth
+    outside_weight: torch.Tensor | None = None  # [H, W] float: 1 / (pixels off the finger) off it, 0 on it
+    depth_weight: torch.Tensor | None = None  # [H, W] float: 1 / (valid pixels * depth_scale) where depth_valid
 
     @classmethod
     def from_view(cls, view: View, camera: Camera, device: torch.device, depth: np.ndarray | None = None) -> "FitTarget":
@@ -57,8 +59,13 @@ class FitTarget:
         if depth is not None and (valid_np := mask & np.isfinite(depth) & (depth > 0)).any():
             scale = float(np.median(depth[valid_np]))
             prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
+        # Means over a mask as weighted sums: indexing by a boolean mask costs ~8 ms a step at 640x512 (its
+        # nonzero and scatter), a product 0.5 ms.
+        outside = ~np.asarray(mask, bool)
+        depth_weight = None if valid is None else as_tensor(valid_np / (valid_np.sum() * scale))
         return cls(as_tensor(image), as_tensor(mask, torch.bool), as_tensor(camera.K), as_tensor(camera.world_to_cam),
-                   view.width, view.height, prior, valid, scale)
+                   view.width, view.height, prior, valid, scale, as_tensor(outside / max(int(outside.sum()), 1)),
+                   depth_weight)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,11 +209,10 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
-            outside = ~target.mask
-            loss = loss + config.lambda_silhouette * out.alpha[outside].sum() / outside.sum().clamp_min(1)
+            loss = loss + config.lambda_silhouette * (out.alpha * target.outside_weight).sum()
         if target.depth is not None:  # stay near the aligned geometry: photos alone under-constrain depth
-            error = (out.depth - target.depth).abs()[target.depth_valid] / target.depth_scale
-            loss = loss + config.lambda_depth * error.mean()
+            error = torch.where(target.depth_valid, (out.depth - target.depth).abs(), 0.0)  # relative L1, mean over valid
+            loss = loss + config.lambda_depth * (error * target.depth_weight).sum()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
