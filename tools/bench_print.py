@@ -1,6 +1,7 @@
 """Rolled-equivalent prints of synthetic fingers against their true rolled prints (issue 23's targets).
 
     python3 tools/bench_print.py [--seeds 0 1 2 3 4] [--rig uwa] [--size 1280x1024] [--scale truth|ridge]
+                                 [--enhance gabor|snfen|gbfen] [--work FOLDER]
 
 Per seed: ``fs3d synth`` (three views at -45/0/+45 degrees on the uwa rig), a geometry-only fuse of the
 photos alone (no cameras; with the photos' true pixels per mm at the finger when ``--scale truth``, as a
@@ -38,6 +39,7 @@ def main() -> int:
     parser.add_argument("--size", default="1280x1024")
     parser.add_argument("--scale", choices=("truth", "ridge"), default="truth")
     parser.add_argument("--out", type=Path, help="folder to keep the prints in")
+    parser.add_argument("--enhance", default="gabor", help="the print's enhancer: gabor (default), or pyfing's snfen / gbfen")
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x"))
@@ -57,7 +59,7 @@ def main() -> int:
                 config = FuseConfig(splat=None, px_per_mm=px_per_mm if args.scale == "truth" else None)
                 write_reconstruction(fuse(blind, config), reconstruction)
             started = time.perf_counter()
-            result, scale_from, _ = print_reconstruction(reconstruction)
+            result, scale_from, _ = print_reconstruction(reconstruction, enhancer=args.enhance)
             seconds = time.perf_counter() - started
             found = analyse(ContactImage.of_print(result.image, result.period_px), nfiq2=False)
             quality = analyse(ContactImage.of_print(nfiq2_region(result.image, result.origin_px[0]), 9.0)).nfiq2
@@ -84,7 +86,8 @@ def main() -> int:
         row["genuine"] = match_score(prints[row["seed"]], truths[row["seed"]])
         row["impostors"] = [match_score(prints[row["seed"]], truths[s]) for s in truths if s != row["seed"]]
         row["impostor"] = max(row["impostors"], default=0)
-    print(f"Machine: {info['cpu']}, {info['cores']} cores; {args.rig} rig {args.size}, scale from {args.scale}.\n")
+    print(f"Machine: {info['cpu']}, {info['cores']} cores; {args.rig} rig {args.size}, scale from {args.scale}; "
+          f"enhancer {args.enhance}.\n")
     print("| seed | true minutiae inside | located within 8 px | fit scale | bozorth3 genuine | bozorth3 impostor (max) "
           "| coverage ° | NFIQ2 | mindtct minutiae | print s |\n|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:

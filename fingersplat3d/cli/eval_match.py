@@ -50,6 +50,8 @@ def add(actions) -> None:
     match.add_argument("--angles", type=angle_list, default=DEFAULT_ANGLES,
                        help="render angles in degrees about the rig axis, comma-separated, as --angles=-30,0,30 (default "
                             f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
+    match.add_argument("--enhance", choices=("gabor", "snfen", "gbfen"), default="gabor",
+                       help="ridge enhancement of the rolled prints (as fs3d print --enhance)")
     match.add_argument("--ridges", choices=("bright", "dark"), default="bright",
                        help="how ridge crests look in the photos (default bright: contactless rigs' plain light)")
     match.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
@@ -77,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
                                        naming=args.naming, ridges=args.ridges, rolled=args.rolled,
-                                       gallery=gallery, mirror=args.mirror)
+                                       gallery=gallery, mirror=args.mirror, enhancer=args.enhance)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

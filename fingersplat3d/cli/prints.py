@@ -31,6 +31,9 @@ def add(commands) -> None:
     prints.add_argument("--mirror", action="store_true",
                         help="mirror the prints left-right, as an inked or scanned contact print is of a photo of the pad "
                              "(default: a photo's handedness, as fs3d synth's true rolled prints)")
+    prints.add_argument("--enhance", choices=("gabor", "snfen", "gbfen"), default="gabor",
+                        help="ridge enhancement of a model's print: gabor (the default, built in), or pyfing's learned "
+                             "snfen or classical gbfen (pip install 'fingersplat3d[learned]'; measured in docs/prints.md)")
     prints.add_argument("--no-nfiq2", action="store_true", help="skip NFIQ2 and the minutiae count")
     prints.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     prints.set_defaults(run=run)
@@ -59,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         pairs = list(zip(args.inputs, _names(args.inputs)))
         for source, name in tqdm(pairs, desc="fs3d print", unit="print", disable=None):
             rows.append(make_print(source, name, folder, px_per_mm=args.px_per_mm, ppi=args.ppi, ridges=args.ridges,
-                                   nfiq2=not args.no_nfiq2, mirror=args.mirror))
+                                   nfiq2=not args.no_nfiq2, mirror=args.mirror, enhancer=args.enhance))
         write_rows(folder / "prints.csv", COLUMNS, rows)
     failed = [row for row in rows if row["status"] != "done"]
     for row in rows:

@@ -169,7 +169,7 @@ def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, p
     return finger, capture, gallery_view, results
 
 
-def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str):
+def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str, enhancer: str = "gabor"):
     """The rolled-equivalent print of a reconstruction: ``(finger, capture, gallery view, print)``."""
     from ..eval.contact import ContactImage
     from ..eval.fingerprint import analyse
@@ -184,7 +184,7 @@ def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str):
     except ValueError:
         gallery_view = identities[0][2]
     try:
-        result, _, _ = print_reconstruction(folder, ridges=ridges)
+        result, _, _ = print_reconstruction(folder, ridges=ridges, enhancer=enhancer)
     except FS3DError as error:
         return finger, capture, gallery_view, _Print(name, None, str(error))
     cv2.imwrite(str(prints / f"{name}.png"), result.image)
@@ -242,8 +242,9 @@ def _mirrored(probe: _Print):
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
                          progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
-                         mirror: bool = False) -> dict:
-    """Both protocols; writes the files named in the module docstring and returns the summary."""
+                         mirror: bool = False, enhancer: str = "gabor") -> dict:
+    """Both protocols; writes the files named in the module docstring and returns the summary (``enhancer``: of the
+    rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`)."""
     from tqdm import tqdm
 
     from ..eval.fingerprint import match_score
@@ -262,7 +263,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
         real.append(_print_of(sample.name, image, None, prints, ridges))
     synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
                    for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
-    unrolled = [_rolled(folder, pattern, prints, ridges)
+    unrolled = [_rolled(folder, pattern, prints, ridges, enhancer)
                 for folder in tqdm(rolled, desc="prints (rolled)", unit="model", disable=not progress)]
     rows = []
     for i, j, genuine in real_pairs(samples):

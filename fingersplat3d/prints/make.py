@@ -38,7 +38,7 @@ POINTS_PER_VIEW = 80_000  # model points per view the chart is made from (the de
 
 
 def print_reconstruction(folder: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
-                         ridges: str = "bright") -> tuple[RolledEquivalent, str, np.ndarray]:
+                         ridges: str = "bright", enhancer: str = "gabor") -> tuple[RolledEquivalent, str, np.ndarray]:
     """``(print, where its scale came from, the photo it owes most to)`` of a reconstruction folder."""
     from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
     from ..io.reconstruction_folder import ReconstructionFolder
@@ -83,10 +83,11 @@ def print_reconstruction(folder: Path, *, px_per_mm: float | None = None, ppi: f
         scale, scale_from = ppi / 25.4 * float(np.median(per_view)), "--px-per-mm"
     else:
         scale, scale_from = default_px_per_unit(views, periods) * ppi / ROLLED_PPI, "ridge period"
-    result = rolled_print(chart, views, scale, ridges=ridges)
+    result = rolled_print(chart, views, scale, ridges=ridges, enhancer=enhancer)
     if scale_from == "ridge period" and abs(result.period_px / (TARGET_PERIOD_PX * ppi / ROLLED_PPI) - 1) > PERIOD_SLACK:
         # The photos foreshorten the ridges toward their rims; the print does not: its own period sets the scale.
-        result = rolled_print(chart, views, scale * TARGET_PERIOD_PX * ppi / ROLLED_PPI / result.period_px, ridges=ridges)
+        result = rolled_print(chart, views, scale * TARGET_PERIOD_PX * ppi / ROLLED_PPI / result.period_px, ridges=ridges,
+                              enhancer=enhancer)
     source = photos[int(np.argmax([result.view_share[view.name] for view in views]))]
     return result, scale_from, source
 
@@ -137,9 +138,10 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
 
 
 def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
-               ridges: str = "bright", nfiq2: bool = True, mirror: bool = False) -> dict:
+               ridges: str = "bright", nfiq2: bool = True, mirror: bool = False, enhancer: str = "gabor") -> dict:
     """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason).
-    ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad."""
+    ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad. ``enhancer``: of a model's
+    print (:func:`~fingersplat3d.prints.rolled.rolled_print`)."""
     from ..io.images import write_image
     from ..viz import gray8, side_by_side
 
@@ -147,7 +149,8 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
     row = {"name": name, "source": str(source)}
     try:
         if source.is_dir():
-            result, scale_from, photo = print_reconstruction(source, px_per_mm=px_per_mm, ppi=ppi, ridges=ridges)
+            result, scale_from, photo = print_reconstruction(source, px_per_mm=px_per_mm, ppi=ppi, ridges=ridges,
+                                                             enhancer=enhancer)
             image, mask, centre_x = result.image, result.mask, result.origin_px[0]
             per_mm = ppi / 25.4
             row.update(kind="rolled", ppi=ppi, scale_from=scale_from, coverage_deg=round(result.coverage_deg, 1))

@@ -88,7 +88,8 @@ class RolledEquivalent:
         return int(self.mask.sum())
 
 
-def rolled_print(chart: SkinChart, views: Sequence[PrintView], px_per_unit: float, *, ridges: str = "bright") -> RolledEquivalent:
+def rolled_print(chart: SkinChart, views: Sequence[PrintView], px_per_unit: float, *, ridges: str = "bright",
+                 enhancer: str = "gabor") -> RolledEquivalent:
     """The rolled-equivalent print of ``chart`` textured from ``views`` (module docstring)."""
     if ridges not in ("bright", "dark"):
         raise InputError(f"ridges={ridges!r}: use 'bright' (crests are the bright lines) or 'dark'")
@@ -123,7 +124,12 @@ def rolled_print(chart: SkinChart, views: Sequence[PrintView], px_per_unit: floa
     texture[inked] = blend[inked] / total[inked]
     texture = texture.reshape(height, width).astype(np.float32)
     period = estimate_ridge_period(0.5 + 0.25 * texture, mask)
-    enhanced = gabor_enhance(texture, mask, period)
+    if enhancer == "gabor":
+        enhanced = gabor_enhance(texture, mask, period)
+    else:  # pyfing's (prints/learned.py), measured against the Gabor filter in docs/measurements.md
+        from .learned import pyfing_enhance
+
+        enhanced = pyfing_enhance(texture, mask, period, enhancer)
     if COHERENCE_MIN > 0:
         flowing = ndimage.binary_fill_holes(ridge_coherence(texture, mask, period) >= COHERENCE_MIN)
         flowing = ndimage.binary_opening(flowing, iterations=int(period))
