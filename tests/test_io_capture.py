@@ -214,3 +214,20 @@ def test_read_image_round_trip_8_and_16_bit_files(tmp_path):
     capture = Capture((View("b", read_image(tmp_path / "b.png")),))
     folder = write_capture(capture, tmp_path / "c16", image_bits=16)
     np.testing.assert_array_equal(cv2.imread(str(folder / "images" / "b.png"), cv2.IMREAD_UNCHANGED), raw16)
+
+
+def test_a_phone_photo_is_read_upright(tmp_path):
+    """A JPEG stored sideways with an EXIF orientation tag (as phones write them) is read as a viewer shows it;
+    its alpha-free pixels and the other formats are read as stored."""
+    from PIL import Image
+
+    stored = np.zeros((40, 60, 3), np.uint8)
+    stored[:, :, 0] = np.arange(60, dtype=np.uint8)[None, :] * 4  # red grows to the right, as stored
+    picture = Image.fromarray(stored)
+    tags = picture.getexif()
+    tags[274] = 6  # "rotate 90 clockwise to display"
+    picture.save(tmp_path / "phone.jpg", exif=tags, quality=100)
+    picture.save(tmp_path / "plain.jpg", quality=100)
+    upright, plain = read_image(tmp_path / "phone.jpg"), read_image(tmp_path / "plain.jpg")
+    assert plain.shape[:2] == (40, 60) and upright.shape[:2] == (60, 40)
+    assert upright[:, :, 0].mean(axis=1)[-1] > upright[:, :, 0].mean(axis=1)[0] + 0.5  # red now grows downward

@@ -32,25 +32,27 @@ def find_files(paths: list[Path], suffixes: tuple[str, ...] = IMAGE_SUFFIXES) ->
     return found
 
 
-def _read_raw(path: Path) -> np.ndarray:
+def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
+    """The file's pixels as stored (any depth); ``upright``: turned as its EXIF orientation says, as a viewer shows
+    it (phone photos are stored sideways with a tag), the alpha channel dropped."""
     if not path.is_file():
         raise input_error(path, "file not found")
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    raw = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if upright else cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
         raise input_error(path, "not a readable image (corrupt or unsupported format)")
     return raw
 
 
 def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
-    """Read an image as float32 in [0, 1].
+    """Read an image as float32 in [0, 1], upright as its EXIF orientation says (as every viewer shows a phone photo).
 
     ``gray=None`` keeps what the file holds (colour images whose three channels are equal come
     back grayscale); ``True`` converts to one channel; ``False`` always returns RGB.
     """
     path = Path(path)
-    raw = _read_raw(path)
+    raw = _read_raw(path, upright=True)
     if raw.dtype == np.uint8:
         image = raw.astype(np.float32) / 255.0
     elif raw.dtype == np.uint16:
