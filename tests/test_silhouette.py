@@ -74,3 +74,13 @@ def test_frames_stay_finite_on_degenerate_masks():
         frame = silhouette_frame(mask)
         assert np.all(np.isfinite(frame.axis)) and np.isfinite(frame.taper) and frame.tip_side in {"top", "bottom", "left", "right"}
     assert len(orient_frames([crop(top=70, bottom=70)] * 2)) == 2
+
+
+@pytest.mark.parametrize("window, count", [(3, 3), (5, 40), (21, 21), (31, 200)])
+def test_local_quadratic_is_scipys_savgol_filter(window, count):
+    from scipy.signal import savgol_filter
+
+    from fingersplat3d.segment.silhouette import local_quadratic
+
+    values = np.random.default_rng(window).normal(size=count).cumsum() + np.linspace(0, 5, count) ** 2
+    assert np.allclose(local_quadratic(values, window), savgol_filter(values, window, 2, mode="interp"), atol=1e-9)

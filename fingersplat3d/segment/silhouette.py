@@ -21,9 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import median_filter
-from scipy.signal import savgol_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames",
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames", "local_quadratic",
            "TIP_BASES"]
 
 TIP_BASES = {
@@ -114,9 +113,28 @@ def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothin
         # A local quadratic of w^2 removes them and is exact over an ellipsoidal cap (w^2 is
         # quadratic in s there) as well as over a straight or tapered body.
         if count > window:
-            half_width = np.sqrt(np.maximum(savgol_filter(half_width ** 2, window, 2, mode="interp"), 0.25))
-            centre = savgol_filter(centre, window, 2, mode="interp")
+            half_width = np.sqrt(np.maximum(local_quadratic(half_width ** 2, window), 0.25))
+            centre = local_quadratic(centre, window)
     return Sections(s0, half_width, centre)
+
+
+def local_quadratic(values: np.ndarray, window: int) -> np.ndarray:
+    """Savitzky-Golay smoothing of order 2 over an odd ``window`` (<= ``len(values)``), the ends taken from the quadratic
+    fitted to the first and last windows: ``scipy.signal.savgol_filter(values, window, 2, mode="interp")``.
+
+    Written here because importing ``scipy.signal`` (it pulls ``scipy.stats``) cost 0.8 s of every command's start;
+    ``tests/test_silhouette.py`` checks it against scipy's.
+    """
+    values = np.asarray(values, np.float64)
+    half = window // 2
+    offsets = np.arange(-half, half + 1, dtype=np.float64)
+    weights = np.linalg.pinv(np.vander(offsets, 3, increasing=True))[0]  # the fitted quadratic's value at the centre
+    out = np.empty_like(values)
+    out[half:len(values) - half] = np.convolve(values, weights[::-1], mode="valid")
+    ends = np.arange(window, dtype=np.float64)
+    out[:half] = np.polyval(np.polyfit(ends, values[:window], 2), ends[:half])
+    out[len(values) - half:] = np.polyval(np.polyfit(ends, values[-window:], 2), ends[window - half:])
+    return out
 
 
 @dataclass(frozen=True, eq=False)
