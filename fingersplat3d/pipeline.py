@@ -458,7 +458,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                     ensure_compiled(lambda text: bar.set_postfix_str(f"splat: {text}"))
                     bar.set_postfix_str("splat")
                 splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean,
-                                        depths=depths, device=device, progress=progress)
+                                        depths=depths, device=device, progress=progress,
+                                        periods=scale.working_view_periods_px())
             cameras = splat.cameras
             report["splat"] = splat.report
             bar.update()

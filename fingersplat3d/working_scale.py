@@ -87,13 +87,18 @@ class WorkingScale:
     surveyed_whole: bool = False
     """Whether every view's survey copy was the photo itself (photos of at most :data:`SURVEY_SIDE` px)."""
 
-    def working_period_px(self) -> float | None:
-        """The capture's ridge period in working pixels when it was measured exactly as the registration measures it
+    def working_view_periods_px(self) -> tuple[float, ...] | None:
+        """Each view's ridge period in working pixels when it was measured exactly as the later stages measure it
         (on the working images themselves: every view measured, photos kept as they are), else None."""
         periods = np.asarray(self.view_periods_px, np.float64)
         if self.factor != 1.0 or not self.surveyed_whole or not periods.size or not np.isfinite(periods).all():
             return None
-        return float(np.median(periods))
+        return tuple(float(p) for p in periods)
+
+    def working_period_px(self) -> float | None:
+        """The capture's ridge period in working pixels (the median of :meth:`working_view_periods_px`), or None."""
+        periods = self.working_view_periods_px()
+        return None if periods is None else float(np.median(periods))
 
     def size(self, size: tuple[int, int]) -> tuple[int, int]:
         return size if self.factor == 1.0 else scaled_size(size, self.factor)

@@ -81,20 +81,20 @@ class SplatFit:
     seconds: float
 
 
-def gaussian_budget(views: Sequence[View], config: SplatConfig) -> int:
+def gaussian_budget(views: Sequence[View], config: SplatConfig, periods: Sequence[float] | None = None) -> int:
     """Gaussians the finger needs: ``gaussians_per_cell`` per (ridge period / 4)^2 of finger area.
 
     Resolving a ridge (a bright and a dark band per period) takes about two Gaussians across each
     band, i.e. a spacing of a quarter period; the areas of the views' masks are summed and divided
-    by ``view_overlap`` (how many views see an average skin point).
+    by ``view_overlap`` (how many views see an average skin point). ``periods``: each view's ridge
+    period in pixels when already measured (else measured here).
     """
     from ..align.correspond.texture import estimate_ridge_period
 
     cells = 0.0
-    for view in views:
+    for k, view in enumerate(views):
         mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
-        gray = view.image if view.image.ndim == 2 else view.image.mean(axis=2)
-        period = estimate_ridge_period(gray, mask)
+        period = float(periods[k]) if periods is not None else estimate_ridge_period(view.image, mask)
         cells += float(mask.sum()) / (period / 4.0) ** 2
     budget = config.gaussians_per_cell * cells / max(config.view_overlap, 1.0)
     return int(np.clip(budget, config.min_gaussians, config.max_gaussians))

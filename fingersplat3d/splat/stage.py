@@ -44,8 +44,10 @@ def _initial_gaussians(cloud, channels: int, budget: int, config: SplatConfig, s
 
 def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_views: Sequence[int], cloud,
                     config: SplatConfig, clean_config=None, *, depths: Sequence[np.ndarray] | None = None,
-                    device: torch.device | None = None, progress: bool = False) -> SplatStage:
-    """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks."""
+                    device: torch.device | None = None, progress: bool = False,
+                    periods: Sequence[float] | None = None) -> SplatStage:
+    """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks (``periods``:
+    every view's ridge period in pixels, when already measured)."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from .voting import CleanConfig, clean_with_masks
 
@@ -53,7 +55,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     clean_config = CleanConfig() if clean_config is None else clean_config
     train_views = [views[v] for v in fitted_views]
     train_cameras = [cameras[v] for v in fitted_views]
-    budget = gaussian_budget(train_views, config)
+    budget = gaussian_budget(train_views, config, None if periods is None else [periods[v] for v in fitted_views])
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
     train_depths = [depths[v] for v in fitted_views] if depths is not None else None
     fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, depths=train_depths,
