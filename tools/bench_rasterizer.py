@@ -105,6 +105,25 @@ def time_render(scene, repeats: int, tile_size: int, path: str, zoom: int = 1) -
     return sorted(forward)[len(forward) // 2], sorted(backward)[len(backward) // 2], fastest
 
 
+def calibration_seconds(repeats: int) -> float:
+    """Median seconds of a fixed torch workload on this machine with the same threads, so that rasterizer times read
+    as a machine-independent ratio (issue 24's target: fwd+bwd of the main case <= 1.0 times this). The workload is
+    dense float32 work of a splat step's size: forward and backward of a 5x5 convolution, 8 -> 8 channels, over one
+    640x512 image, and four 1024x1024 matrix products."""
+    g = torch.Generator().manual_seed(0)
+    image = torch.rand(1, 8, HEIGHT, WIDTH, generator=g, requires_grad=True)
+    kernel = torch.rand(8, 8, 5, 5, generator=g, requires_grad=True)
+    a, b = torch.rand(1024, 1024, generator=g), torch.rand(1024, 1024, generator=g)
+    times = []
+    for _ in range(repeats + 1):  # the first is a warm-up
+        start = time.perf_counter()
+        torch.nn.functional.conv2d(image, kernel, padding=2).square().sum().backward()
+        for _ in range(4):
+            a = (a @ b) / 1024.0
+        times.append(time.perf_counter() - start)
+    return sorted(times[1:])[len(times[1:]) // 2]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="main figure only")
@@ -119,10 +138,12 @@ def main() -> None:
     info = machine()
     start_load = tuple(round(x, 2) for x in info["load"])
     header = ("| path | N | scale x | image | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
-              "fwd Mpairs/s | bwd Mpairs/s | load |")
+              "fwd+bwd / calibration | fwd Mpairs/s | bwd Mpairs/s | load |")
     lines = [(f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
               f"tile {args.tile_size}, load average at start {start_load}"), "", header,
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    calibration = calibration_seconds(args.repeats)
+    lines[0] += f"; calibration workload {calibration:.3f} s (`calibration_seconds`)"
     print(lines[0], flush=True)
     cases = [(200_000, 1.0, 1)]
     if not args.quick:
@@ -136,7 +157,7 @@ def main() -> None:
             evaluated_text = "–" if path == "numba" else f"{evaluated / 1e6:.1f}"
             row = (f"| {path} | {n // 1000}k | {factor:g} | {WIDTH * zoom}x{HEIGHT * zoom} | {covered:.0%} | "
                    f"{pairs / 1e6:.1f} | {evaluated_text} | "
-                   f"{fwd:.3f} | {bwd:.3f} | {fwd + bwd:.3f} ({best:.3f}) | {pairs / fwd / 1e6:.0f} | "
+                   f"{fwd:.3f} | {bwd:.3f} | {fwd + bwd:.3f} ({best:.3f}) | {(fwd + bwd) / calibration:.2f} | {pairs / fwd / 1e6:.0f} | "
                    f"{pairs / bwd / 1e6:.0f} | {os.getloadavg()[0]:.1f} |")
             lines.append(row)
             print(row, flush=True)
