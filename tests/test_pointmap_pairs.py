@@ -4,6 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fingersplat3d.align.register import RegistrationConfig
 from fingersplat3d.align.solve.global_opt import GlobalAlignConfig, global_align
 from fingersplat3d.align.solve.pointmap_pairs import register_pointmap_pair
 from fingersplat3d.eval import relative_rotation_errors
@@ -137,8 +138,8 @@ def test_global_alignment_from_pairwise_pointmaps_recovers_the_cameras(capture):
 @pytest.mark.slow
 def test_fuse_aligns_views_from_pairwise_pointmaps(capture):
     register_backend("groundtruth-pairs", lambda: _GroundTruthPairs(capture))
-    config = FuseConfig(backend="groundtruth-pairs", splat=None, global_align=GlobalAlignConfig(iterations=40,
-                                                                                                polish_iterations=20))
+    config = FuseConfig(backend="groundtruth-pairs", splat=None,
+                        registration=RegistrationConfig(global_align=GlobalAlignConfig(iterations=40, polish_iterations=20)))
     result = fuse(capture, config)
     assert all(record["method"] == "pointmaps" and record["ok"] for record in result.report["pairs"])
     assert result.report["alignment"]["ok"]

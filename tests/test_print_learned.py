@@ -36,6 +36,7 @@ def test_pyfing_enhancement_keeps_the_contract_and_the_ridges(method):
     before = np.corrcoef(texture[inner], clean[inner])[0, 1]
     after = np.corrcoef(enhanced[inner], clean[inner])[0, 1]
     assert after > before and after > 0.6
+    assert (pyfing_enhance(texture, np.zeros_like(mask), 9.0, method) == 0).all()  # no skin: nothing to enhance
 
 
 def test_a_missing_pyfing_is_one_sentence(monkeypatch):

@@ -59,6 +59,9 @@ def pyfing_enhance(texture: np.ndarray, mask: np.ndarray, period: float, method:
         raise InputError(f"unknown learned enhancer {method!r}; choose from {sorted(LEARNED_ENHANCERS)}")
     library = _pyfing()
     orientation_method, enhancement_method = LEARNED_ENHANCERS[method]
+    inside = np.asarray(mask, bool)
+    if not inside.any():
+        return np.zeros(inside.shape, np.float32)
     fingerprint = as_fingerprint(texture, mask)
     segmentation = np.where(np.asarray(mask, bool), 255, 0).astype(np.uint8)
     periods = np.full(fingerprint.shape, float(period), np.float32)
@@ -68,9 +71,6 @@ def pyfing_enhance(texture: np.ndarray, mask: np.ndarray, period: float, method:
                                                    method=enhancement_method)
     # pyfing: ridges near-white (255), valleys near-black; here ridges positive, zero mean, unit RMS on the skin.
     signal = np.asarray(enhanced, np.float64) / 255.0 - 0.5
-    inside = np.asarray(mask, bool)
-    if not inside.any():
-        return np.zeros(fingerprint.shape, np.float32)
     signal = signal - float(signal[inside].mean())
     rms = float(np.sqrt(np.mean(signal[inside] ** 2)))
     return np.where(inside, signal / max(rms, 1e-12), 0.0).astype(np.float32)
