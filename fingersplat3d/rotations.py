@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["axis_angle_to_matrix", "normalize_quaternions", "quaternion_to_matrix", "matrix_to_quaternion",
-           "rotation_angle"]
+__all__ = ["axis_angle_to_matrix", "skew", "left_jacobian", "normalize_quaternions", "quaternion_to_matrix",
+           "matrix_to_quaternion", "rotation_angle"]
 
 _TINY = 1e-12
 
@@ -64,12 +64,32 @@ def axis_angle_to_matrix(omega: torch.Tensor) -> torch.Tensor:
     theta = torch.sqrt(safe)
     a = torch.where(small, 1.0 - theta2 / 6.0, torch.sin(theta) / theta)
     b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / safe)
-    x, y, z = omega[..., 0], omega[..., 1], omega[..., 2]
-    zero = torch.zeros_like(x)
-    cross = torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
-                         torch.stack([-y, x, zero], -1)], -2)
+    cross = skew(omega)
     eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
     return eye + a * cross + b * (cross @ cross)
+
+
+def skew(v: torch.Tensor) -> torch.Tensor:
+    """``[..., 3] -> [..., 3, 3]`` with ``skew(v) u = v x u``."""
+    x, y, z = v.unbind(-1)
+    zero = torch.zeros_like(x)
+    return torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
+                        torch.stack([-y, x, zero], -1)], -2)
+
+
+def left_jacobian(omega: torch.Tensor) -> torch.Tensor:
+    """``[..., 3] -> [..., 3, 3]``: SO(3)'s left Jacobian, ``Exp(omega + d) ~ Exp(J_l(omega) d) Exp(omega)``:
+    ``I + (1 - cos t) / t^2 [w]_x + (t - sin t) / t^3 [w]_x^2`` (series below ``t^2 = 1e-8``, where the closed form
+    loses its digits)."""
+    theta2 = (omega * omega).sum(-1)[..., None, None]
+    small = theta2 < 1e-8
+    safe = torch.where(small, torch.ones_like(theta2), theta2)
+    theta = torch.sqrt(safe)
+    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / safe)
+    c = torch.where(small, 1.0 / 6.0 - theta2 / 120.0, (theta - torch.sin(theta)) / (safe * theta))
+    cross = skew(omega)
+    eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
+    return eye + b * cross + c * (cross @ cross)
 
 
 def rotation_angle(R_a: torch.Tensor, R_b: torch.Tensor) -> torch.Tensor:

@@ -9,7 +9,7 @@ log focal and its field value. For one direction, source ``s`` and target ``t``:
   ``d_s = e^ls (m + e^la (z - m) + rho F)``, ``R_s = Exp(omega_s) R0_s``;
 * project: ``y = R_t^T (x - t_t)``, ``proj = f_t y_xy / y_z + c_t``; ``A = d proj / d x``
   ``= f_t / y_z [[1, 0, -y_x / y_z], [0, 1, -y_y / y_z]] R_t^T``;
-* rotation updates through the left Jacobian of SO(3), ``Exp(omega + delta) ~ Exp(J_l(omega) delta) Exp(omega)``:
+* rotation updates through the left Jacobian of SO(3) (:func:`~fingersplat3d.rotations.left_jacobian`):
   ``d x / d omega_s = -[w]_x J_l(omega_s)`` and ``d proj / d omega_t = A [x - t_t]_x J_l(omega_t)``;
 * ``d/dt_s = A``, ``d/dt_t = -A``, ``d/dlf_t = proj - c_t``, ``d/dlf_s = A R_s d_s (-(uv_s - c_s) / f_s, 0)``,
   and the depth unknowns through ``A R_s ray_s``.
@@ -22,35 +22,13 @@ from __future__ import annotations
 
 import torch
 
-from ...rotations import axis_angle_to_matrix
+from ...rotations import axis_angle_to_matrix, left_jacobian, skew
 
-__all__ = ["ROW_UNKNOWNS", "left_jacobian", "row_residuals_and_derivatives"]
+__all__ = ["ROW_UNKNOWNS", "row_residuals_and_derivatives"]
 
 # The local unknowns of one correspondence, in the order of the derivative's last axis, with their widths.
 ROW_UNKNOWNS = (("omega_a", 3), ("t_a", 3), ("ls_a", 1), ("la_a", 1), ("lf_a", 1), ("f_a", 1),
                 ("omega_b", 3), ("t_b", 3), ("ls_b", 1), ("la_b", 1), ("lf_b", 1), ("f_b", 1))
-
-
-def _skew(v: torch.Tensor) -> torch.Tensor:
-    """``[..., 3] -> [..., 3, 3]`` with ``skew(v) u = v x u``."""
-    x, y, z = v.unbind(-1)
-    zero = torch.zeros_like(x)
-    return torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
-                        torch.stack([-y, x, zero], -1)], -2)
-
-
-def left_jacobian(omega: torch.Tensor) -> torch.Tensor:
-    """``[..., 3] -> [..., 3, 3]``: SO(3)'s left Jacobian ``I + (1 - cos t) / t^2 [w]_x + (t - sin t) / t^3 [w]_x^2``
-    (series below ``t^2 = 1e-8``, where the closed form loses its digits)."""
-    theta2 = (omega * omega).sum(-1)[..., None, None]
-    small = theta2 < 1e-8
-    safe = torch.where(small, torch.ones_like(theta2), theta2)
-    theta = torch.sqrt(safe)
-    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / safe)
-    c = torch.where(small, 1.0 / 6.0 - theta2 / 120.0, (theta - torch.sin(theta)) / (safe * theta))
-    cross = _skew(omega)
-    eye = torch.eye(3, dtype=omega.dtype, device=omega.device).expand(cross.shape)
-    return eye + b * cross + c * (cross @ cross)
 
 
 def _direction(source: dict, target: dict, uv_s, uv_t, white_t) -> tuple[torch.Tensor, torch.Tensor]:
@@ -79,13 +57,13 @@ def _direction(source: dict, target: dict, uv_s, uv_t, white_t) -> tuple[torch.T
     along_ray = torch.einsum("nij,nj->ni", A, turned_ray)
     focal_ray = torch.cat([-offset, torch.zeros_like(offset[:, :1])], 1)
     columns = [
-        -A @ _skew(w) @ left_jacobian(source["omega"]),  # omega_s
+        -A @ skew(w) @ left_jacobian(source["omega"]),  # omega_s
         A,  # t_s
         (depth[:, None] * along_ray)[:, :, None],  # ls_s
         (scale * alpha * (z - median))[:, None, None] * along_ray[:, :, None],  # la_s
         (depth[:, None] * torch.einsum("nij,nj->ni", A, torch.einsum("nij,nj->ni", source["R"], focal_ray)))[:, :, None],  # lf_s
         (scale * source["relief"])[:, None, None] * along_ray[:, :, None],  # f_s
-        A @ _skew(q) @ left_jacobian(target["omega"]),  # omega_t
+        A @ skew(q) @ left_jacobian(target["omega"]),  # omega_t
         -A,  # t_t
         torch.zeros_like(A[:, :, :2]),  # ls_t, la_t: the target's depth does not enter
         projected[:, :, None],  # lf_t
