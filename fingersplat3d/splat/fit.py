@@ -43,29 +43,26 @@ class FitTarget:
     world_to_cam: torch.Tensor  # [4, 4]
     width: int
     height: int
-    depth: torch.Tensor | None = None  # [H, W] prior depth (NaN = none), relative to its median
+    depth: torch.Tensor | None = None  # [H, W] prior depth, 0 where it has none
     depth_valid: torch.Tensor | None = None  # [H, W] bool: mask & finite prior depth
-    depth_scale: float = 1.0  # median of the prior depth
     outside_weight: torch.Tensor | None = None  # [H, W] float: 1 / (pixels off the finger) off it, 0 on it
-    depth_weight: torch.Tensor | None = None  # [H, W] float: 1 / (valid pixels * depth_scale) where depth_valid
+    depth_weight: torch.Tensor | None = None  # [H, W] float: 1 / (valid pixels * the prior's median) where depth_valid
 
     @classmethod
     def from_view(cls, view: View, camera: Camera, device: torch.device, depth: np.ndarray | None = None) -> "FitTarget":
         image = view.image if view.image.ndim == 3 else view.image[..., None]
         mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
         as_tensor = lambda a, dtype=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)  # noqa: E731
-        prior = valid = None
-        scale = 1.0
-        if depth is not None and (valid_np := mask & np.isfinite(depth) & (depth > 0)).any():
-            scale = float(np.median(depth[valid_np]))
-            prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
         # Means over a mask as weighted sums: indexing by a boolean mask costs ~8 ms a step at 640x512 (its
         # nonzero and scatter), a product 0.5 ms.
+        prior = valid = depth_weight = None
+        if depth is not None and (valid_np := mask & np.isfinite(depth) & (depth > 0)).any():
+            scale = float(np.median(depth[valid_np]))  # the depth error is relative to it
+            prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
+            depth_weight = as_tensor(valid_np / (valid_np.sum() * scale))
         outside = ~np.asarray(mask, bool)
-        depth_weight = None if valid is None else as_tensor(valid_np / (valid_np.sum() * scale))
         return cls(as_tensor(image), as_tensor(mask, torch.bool), as_tensor(camera.K), as_tensor(camera.world_to_cam),
-                   view.width, view.height, prior, valid, scale, as_tensor(outside / max(int(outside.sum()), 1)),
-                   depth_weight)
+                   view.width, view.height, prior, valid, as_tensor(outside / max(int(outside.sum()), 1)), depth_weight)
 
 
 @dataclass(frozen=True, eq=False)
