@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
 from ..errors import EXIT_INCOMPLETE, InputError
+from ..prints.learned import ENHANCERS
 from .common import finished, nbis_needed
 from .types import angle_list
 
@@ -50,7 +51,7 @@ def add(actions) -> None:
     match.add_argument("--angles", type=angle_list, default=DEFAULT_ANGLES,
                        help="render angles in degrees about the rig axis, comma-separated, as --angles=-30,0,30 (default "
                             f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
-    match.add_argument("--enhance", choices=("gabor", "snfen", "gbfen"), default="gabor",
+    match.add_argument("--enhance", choices=ENHANCERS, default="gabor",
                        help="ridge enhancement of the rolled prints (as fs3d print --enhance)")
     match.add_argument("--ridges", choices=("bright", "dark"), default="bright",
                        help="how ridge crests look in the photos (default bright: contactless rigs' plain light)")

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from ..errors import EXIT_INCOMPLETE
+from ..prints.learned import ENHANCERS
 from .types import number
 
 __all__ = ["add", "run"]
@@ -31,7 +32,7 @@ def add(commands) -> None:
     prints.add_argument("--mirror", action="store_true",
                         help="mirror the prints left-right, as an inked or scanned contact print is of a photo of the pad "
                              "(default: a photo's handedness, as fs3d synth's true rolled prints)")
-    prints.add_argument("--enhance", choices=("gabor", "snfen", "gbfen"), default="gabor",
+    prints.add_argument("--enhance", choices=ENHANCERS, default="gabor",
                         help="ridge enhancement of a model's print: gabor (the default, built in), or pyfing's learned "
                              "snfen or classical gbfen (pip install 'fingersplat3d[learned]'; measured in docs/prints.md)")
     prints.add_argument("--no-nfiq2", action="store_true", help="skip NFIQ2 and the minutiae count")

@@ -22,10 +22,12 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["pyfing_enhance", "LEARNED_ENHANCERS"]
+__all__ = ["pyfing_enhance", "LEARNED_ENHANCERS", "ENHANCERS"]
 
 LEARNED_ENHANCERS = {"snfen": ("SNFOE", "SNFEN"), "gbfen": ("GBFOE", "GBFEN")}
 """Enhancer name -> (pyfing orientation method, pyfing enhancement method)."""
+ENHANCERS = ("gabor", *LEARNED_ENHANCERS)
+"""Every print enhancer's name: the built-in Gabor filter (:func:`.enhance.gabor_enhance`), then pyfing's."""
 
 
 def _pyfing():

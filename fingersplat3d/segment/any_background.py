@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..scene import scaled_size
 from .regions import fill_holes
 
 __all__ = ["finger_mask_any_background", "ridge_score", "WORK_SIDE", "PERIODS_PX"]
@@ -144,7 +145,7 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     background (see the module docstring)."""
     height, width = image.shape[:2]
     factor = min(1.0, WORK_SIDE / max(height, width))
-    size = (max(1, round(width * factor)), max(1, round(height * factor)))
+    size = scaled_size((width, height), factor)
     small = cv2.resize(image, size, interpolation=cv2.INTER_AREA) if factor < 1.0 else image
     small = np.clip(np.asarray(small, np.float32), 0.0, 1.0)
     top = float(np.percentile(small, 99.5))
