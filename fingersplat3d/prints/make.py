@@ -73,8 +73,7 @@ def print_reconstruction(folder: Path, *, px_per_mm: float | None = None, ppi: f
     frames = orient_frames([view.area if view.area.sum() >= 64 else np.isfinite(view.depth) for view in views])
     axes = [(frame.origin, frame.axis) for frame in frames]
     cloud = np.concatenate(points)
-    chart = skin_chart(cloud, finger_frame(cloud, [view.camera for view in views], axes),
-                       tip_visible=any(frame.tip_found for frame in frames))
+    chart = skin_chart(cloud, finger_frame(cloud, [view.camera for view in views], axes))
     if rec.cameras.units == "mm" or rec.cameras.scale_mm_per_unit is not None:
         mm_per_unit = 1.0 if rec.cameras.units == "mm" else float(rec.cameras.scale_mm_per_unit)
         scale, scale_from = ppi / 25.4 * mm_per_unit, "cameras (mm)"

@@ -21,11 +21,15 @@ of the model's surface two such distances:
    the arc of one cell at the median radius, so cells are square on the skin), smoothed by a
    normalised Gaussian of :data:`SMOOTHING_CELLS` (holes of a cell or two filled), azimuth periodic.
 4. **Arc lengths.** ``b``: around each ring from the pad's centre line (``phi = 0``), the summed
-   lengths of the grid's segments, signed toward ``side``; ``a``: along each meridian from the tip
-   end of the grid. That is the chart ``fs3d synth`` lays its ridges on
-   (:mod:`fingersplat3d.synth.shape`): near-isometric on the body of the finger, where rings and
-   meridians meet at right angles, sheared over the tip cap; measured against the true rolled print
-   in ``tools/bench_print.py``.
+   lengths of the grid's segments, signed toward ``side``; ``a``: along each meridian from the ring
+   that most meridians cross, growing toward the base (the print is drawn tip up). Rolling turns the
+   finger about its axis, so each ring is laid along one row of the paper: every meridian counts from
+   one ring. Counting each from its own far end had put the print's rows where the surface happens
+   to stop, which at the sides is where the side views lose the cap (measured on synthetic fingers:
+   sides shifted 10-25 print pixels along the finger against the pad's centre). This is the chart
+   ``fs3d synth`` lays its ridges on (:mod:`fingersplat3d.synth.shape`) up to how a meridian runs
+   over the tip cap: near-isometric on the body of the finger, where rings and meridians meet at
+   right angles; measured against the true rolled print in ``tools/bench_print.py``.
 
 Pure numpy/scipy; units are the model's.
 """
@@ -171,20 +175,19 @@ def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
     return coefficients
 
 
-def skin_chart(points: np.ndarray, frame: FingerFrame, tip_visible: bool = True) -> SkinChart:
-    """The chart of the surface sampled by ``points [N, 3]`` in ``frame`` (module docstring, steps 2-4);
-    ``tip_visible``: whether the fingertip is in view (a then counts from its pole, else from the cut end)."""
+def skin_chart(points: np.ndarray, frame: FingerFrame) -> SkinChart:
+    """The chart of the surface sampled by ``points [N, 3]`` in ``frame`` (module docstring, steps 2-4)."""
     points = np.asarray(points, np.float64)
     points = points[np.isfinite(points).all(1)]
     if len(points) < MIN_POINTS:
         raise InputError(f"the model has {len(points)} surface points: too few to unroll")
-    for _ in range(AXIS_ROUNDS + 1):
+    for round_ in range(AXIS_ROUNDS + 1):
         local = frame.local(points)
         spread = np.percentile(np.hypot(local[:, 1] - np.median(local[:, 1]), local[:, 2] - np.median(local[:, 2])), 90)
         centre = _centre_line(local, max(spread / 8.0, 1e-9))
         middle = float(np.median(local[:, 0]))
         slope = np.array([np.polyval(np.polyder(centre[:, c]), middle) for c in (0, 1)])
-        if np.hypot(*slope) < 1e-4:
+        if np.hypot(*slope) < 1e-4 or round_ == AXIS_ROUNDS:  # the last round's centre line is in the frame it was fitted in
             break
         frame = _turned(frame, slope)  # rings across the centre line, not across the first guess of the axis
     cu, cw = (np.polyval(centre[:, c], local[:, 0]) for c in (0, 1))
@@ -212,11 +215,7 @@ def skin_chart(points: np.ndarray, frame: FingerFrame, tip_visible: bool = True)
     local_nodes = np.stack([np.broadcast_to(x[:, None], rho.shape), cu_s[:, None] + rho * np.cos(phi)[None, :],
                             cw_s[:, None] + rho * np.sin(phi)[None, :]], -1)
     nodes = frame.world(local_nodes)
-    pole = None
-    if tip_visible:  # the tip: where the centre line leaves the surface's far end
-        end = float(local[:, 0].max())
-        pole = frame.world(np.array([end, np.polyval(centre[:, 0], end), np.polyval(centre[:, 1], end)]))
-    return SkinChart(frame, nodes, _normals(nodes, frame), *_arc_lengths(nodes, phi, pole), x, phi)
+    return SkinChart(frame, nodes, _normals(nodes, frame), *_arc_lengths(nodes, phi), x, phi)
 
 
 def _derivative(nodes: np.ndarray, axis: int, wrap: bool) -> np.ndarray:
@@ -244,9 +243,8 @@ def _normals(nodes: np.ndarray, frame: FingerFrame) -> np.ndarray:
         return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
 
 
-def _arc_lengths(nodes: np.ndarray, phi: np.ndarray, pole: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, b)`` of every node (module docstring, step 4); NaN where the path from its origin is broken. ``pole``:
-    the tip's point on the surface when the tip is in view (a counts from it), else None (a counts from the cut end)."""
+def _arc_lengths(nodes: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, b)`` of every node (module docstring, step 4); NaN where the path from its origin is broken."""
     stations, columns = nodes.shape[:2]
     ring = np.linalg.norm(np.diff(nodes, axis=1), axis=-1)  # [X, P-1]: node j to j+1
     zero = int(np.argmin(np.abs(phi)))
@@ -255,24 +253,14 @@ def _arc_lengths(nodes: np.ndarray, phi: np.ndarray, pole: np.ndarray | None) ->
     b[:, zero + 1:] = np.cumsum(ring[:, zero:], axis=1)  # NaN propagates past a gap
     b[:, :zero] = -np.cumsum(ring[:, :zero][:, ::-1], axis=1)[:, ::-1]
     b[~np.isfinite(nodes).all(-1)] = np.nan
-    # a: summed along each meridian from a reference station that most of them cross, where each starts at its own
-    # length up to the tip: its nodes' segments to its last node, then (tip in view) straight on to the pole.
+    # a: summed along each meridian from the ring that most meridians cross (rolling lays each ring along one row).
     meridian = np.linalg.norm(np.diff(nodes, axis=0), axis=-1)  # [X-1, P]: station i to i+1
     finite = np.isfinite(nodes).all(-1)
     a = np.full((stations, columns), np.nan)
     if not finite.any():
         return a, b
     reference = int(np.argmax(finite.sum(1)))
-    start = np.full(columns, np.nan)
-    for j in np.flatnonzero(finite[reference]):
-        above = np.flatnonzero(finite[reference:, j])
-        top = reference + int(above[-1])
-        length = float(np.nansum(meridian[reference:top, j]))
-        start[j] = length + (float(np.linalg.norm(nodes[top, j] - pole)) if pole is not None else 0.0)
-    known = np.isfinite(start)
-    weight = ndimage.gaussian_filter1d(known.astype(float), 2.0, mode="wrap")
-    smooth = ndimage.gaussian_filter1d(np.where(known, start, 0.0), 2.0, mode="wrap") / np.maximum(weight, 1e-12)
-    a[reference] = np.where(known, smooth, np.nan)  # the ragged last nodes of the cap, evened out
+    a[reference] = np.where(finite[reference], 0.0, np.nan)
     a[reference + 1:] = a[reference] - np.cumsum(meridian[reference:], axis=0)  # toward the tip
     a[:reference] = a[reference] + np.cumsum(meridian[:reference][::-1], axis=0)[::-1]  # toward the base
     a[~np.isfinite(nodes).all(-1)] = np.nan
