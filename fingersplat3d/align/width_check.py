@@ -2,9 +2,13 @@
 
 Turning about a finger cannot narrow its silhouette faster than a flat board narrows: a section of
 half-width ``w_a`` seen from view a shows at least ``w_a cos(turn)`` to a view turned by ``turn``
-about the finger (exact for a segment, more for anything rounder). So the narrower of two views'
-half-widths, in scene units, bounds their turn from below: ``turn >= acos(w_narrow / w_wide)`` (less a
-tolerance for how well silhouettes are measured).
+about the finger, *when the two rims view a sees lie at one depth* (its chord faces view a: true of
+the section's widest view, and of any view square to a section symmetric about its pad). So the
+narrower of two views' half-widths, in scene units, bounds their turn from below: ``turn >=
+acos(w_narrow / w_wide)`` (less a tolerance for how well silhouettes are measured). It is a bound
+for that case, not for every convex section: when the wider view is itself oblique to a flat
+section, its chord is tilted and the narrower view may be turned less. Measured on another group's
+flat finger: views at -45 and -18 degrees bound their turn at 33.8 degrees against a true 27.
 
 Why it is needed: where two views share little skin, the turn and the relief trade against each
 other, and the alignment takes the relief from a round prior. On a flat finger the prior is too
