@@ -7,8 +7,11 @@ the section's widest view, and of any view square to a section symmetric about i
 narrower of two views' half-widths, in scene units, bounds their turn from below: ``turn >=
 acos(w_narrow / w_wide)`` (less a tolerance for how well silhouettes are measured). It is a bound
 for that case, not for every convex section: when the wider view is itself oblique to a flat
-section, its chord is tilted and the narrower view may be turned less. Measured on another group's
-flat finger: views at -45 and -18 degrees bound their turn at 33.8 degrees against a true 27.
+section, its chord is tilted and the narrower view may be turned less. So only the capture's widest
+view, the one nearest the section's widest extent, bounds its turns to the others; a pair of two
+other views gets no bound. Measured on another group's flat finger (nine rolls): every pair bounded
+from the widest view (the 0-degree one) holds, while bounding every pair had put -45 and -38 degrees
+at least 18 apart (true 7), 23 and 47 at least 37 (true 24), and -45 and -18 at least 34 (true 27).
 
 Why it is needed: where two views share little skin, the turn and the relief trade against each
 other, and the alignment takes the relief from a round prior. On a flat finger the prior is too
@@ -43,15 +46,21 @@ def typical_half_width(mask: np.ndarray) -> float:
 
 
 def turn_lower_bounds_deg(half_widths_px: Sequence[float], depths: Sequence[float], focals: Sequence[float]) -> np.ndarray:
-    """``[N, N]`` degrees: the least turn between views that their silhouette half-widths allow (see the module).
+    """``[N, N]`` degrees: the least turn between the widest view and each other view that their silhouette
+    half-widths allow (see the module); NaN for a pair of two other views.
 
     ``depths``: each view's typical depth of the finger (its silhouette's scale, scene units per
     focal length); ``focals`` in pixels. NaN where a width or depth is not finite and positive.
     """
     width = np.asarray(half_widths_px, np.float64) * np.asarray(depths, np.float64) / np.asarray(focals, np.float64)
     width = np.where(np.isfinite(width) & (width > 0), width, np.nan)
-    ratio = (1.0 + WIDTH_TOLERANCE) * np.minimum(width[:, None], width[None, :]) / np.maximum(width[:, None], width[None, :])
-    return np.degrees(np.arccos(np.clip(ratio, 0.0, 1.0)))
+    bounds = np.full((len(width), len(width)), np.nan)
+    if not np.isfinite(width).any():
+        return bounds
+    widest = int(np.nanargmax(width))
+    turn = np.degrees(np.arccos(np.clip((1.0 + WIDTH_TOLERANCE) * width / width[widest], 0.0, 1.0)))
+    bounds[widest, :], bounds[:, widest] = turn, turn
+    return bounds
 
 
 def least_turns_deg(masks: Sequence[np.ndarray], depths: Sequence[np.ndarray], focals: Sequence[float]) -> np.ndarray:
