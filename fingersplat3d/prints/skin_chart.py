@@ -83,7 +83,7 @@ class SkinChart:
     frame: FingerFrame
     points: np.ndarray  # [X, P, 3] world, NaN where the model has no surface
     normals: np.ndarray  # [X, P, 3] unit, outward
-    a: np.ndarray  # [X, P] arc length from the tip end along the meridians (NaN off the surface)
+    a: np.ndarray  # [X, P] arc length along the meridians from one ring, growing toward the base (NaN off the surface)
     b: np.ndarray  # [X, P] signed arc length around the rings from the pad's centre line
     x: np.ndarray  # [X] station coordinates along the axis (increasing toward the tip)
     phi: np.ndarray  # [P] azimuths (radians, -pi..pi)
