@@ -65,7 +65,7 @@ def pyfing_enhance(texture: np.ndarray, mask: np.ndarray, period: float, method:
     if not inside.any():
         return np.zeros(inside.shape, np.float32)
     fingerprint = as_fingerprint(texture, mask)
-    segmentation = np.where(np.asarray(mask, bool), 255, 0).astype(np.uint8)
+    segmentation = np.where(inside, 255, 0).astype(np.uint8)
     periods = np.full(fingerprint.shape, float(period), np.float32)
     with torch.no_grad():  # Keras on torch returns tensors that require grad, which pyfing reads with .numpy()
         orientation = library.orientation_field_estimation(fingerprint, segmentation, dpi, method=orientation_method)

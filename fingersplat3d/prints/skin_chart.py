@@ -187,7 +187,7 @@ def skin_chart(points: np.ndarray, frame: FingerFrame) -> SkinChart:
         centre = _centre_line(local, max(spread / 8.0, 1e-9))
         middle = float(np.median(local[:, 0]))
         slope = np.array([np.polyval(np.polyder(centre[:, c]), middle) for c in (0, 1)])
-        if np.hypot(*slope) < 1e-4 or round_ == AXIS_ROUNDS:  # the last round's centre line is in the frame it was fitted in
+        if np.hypot(*slope) < 1e-4 or round_ == AXIS_ROUNDS:  # the last centre line stays in the frame it was fitted in
             break
         frame = _turned(frame, slope)  # rings across the centre line, not across the first guess of the axis
     cu, cw = (np.polyval(centre[:, c], local[:, 0]) for c in (0, 1))

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames", "local_quadratic",
-           "TIP_BASES"]
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames",
+           "local_quadratic", "TIP_BASES"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
