@@ -67,6 +67,11 @@ class FuseConfig:
     """Working pixels per ridge period: photos that sample the ridges more finely are scaled down for the geometry
     and the splat fit, and the outputs put back on the photos' grid (:mod:`fingersplat3d.working_scale`); None: the
     photos' own resolution."""
+    focal_px: float | None = None
+    """The cameras' focal length in the photos' pixels, when known (one camera model for every view): the pointmaps
+    are made with it and the alignment keeps it instead of fitting one. Two views cannot fix the focal themselves
+    (their optical axes meet at the finger), and their turn follows it: on the real dev captures two views alone
+    turned 14-16 degrees off with the focal fitted, 1-5 with it given (docs/measurements.md, real captures)."""
     px_per_mm: float | None = None
     """Metric hint: image pixels per millimetre at the finger (first view)."""
     finger_width_mm: float | None = None
@@ -132,6 +137,10 @@ def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
     """``config`` with the alignment's robust scale made the working resolution's: the same share of a ridge period
     as at the resolution it was tuned at (:data:`~fingersplat3d.working_scale.TUNED_PX_PER_RIDGE`), so that the fit
     weighs its matches against its priors alike at any resolution. Photos used as they are keep it."""
+    if config.focal_px is not None:  # a known focal: in working pixels, and held
+        align = replace(config.registration.global_align, optimize_focal=False)
+        config = replace(config, focal_px=config.focal_px * scale.factor,
+                         registration=replace(config.registration, global_align=align))
     if scale.factor == 1.0:
         return config
     align = config.registration.global_align
@@ -162,9 +171,14 @@ def _backend(config: FuseConfig):
     from .pointmaps import get_backend
 
     if config.backend == "dust3r":
+        if config.focal_px is not None:
+            raise InputError("a known focal (--focal-px) is used by the prior backend; the dust3r backend's pointmaps "
+                             "come with the focal its network predicts")
         return get_backend("dust3r", checkpoint=config.checkpoint, device=config.device, batch_size=config.pair_batch)
     if config.checkpoint is not None:
         raise InputError(f"a checkpoint is only used by the dust3r backend, not by {config.backend!r}")
+    if config.focal_px is not None:
+        return get_backend(config.backend, focal_px=config.focal_px)
     return get_backend(config.backend)
 
 
@@ -401,6 +415,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         raise InputError("fs3d fuse needs at least one image")
     if rig is not None:
         _check_rig(capture, rig)
+        if config.focal_px is not None:
+            raise InputError("a rig (--rig) holds its own focal; leave out --focal-px")
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}

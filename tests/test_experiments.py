@@ -1,6 +1,7 @@
 """The benchmarks' measurements (experiments.geometry, experiments.real, experiments.process): view choice,
 scoring summaries and tables, on records made here (the fuses themselves are covered by the slow tests)."""
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -8,8 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from fingersplat3d.experiments.geometry import CASES, GeometryCase, geometry_table, pick_views
 from fingersplat3d.experiments.process import in_fresh_process, peak_rss_mb
-from fingersplat3d.experiments.real import real_table, summarize_real
-from fingersplat3d.scene import Capture, View
+from fingersplat3d.experiments.real import real_table, summarize_real, two_view_table, two_view_turn_errors
+from fingersplat3d.scene import Camera, Capture, View
 
 
 def _cfpose(rolls):
@@ -74,6 +75,32 @@ def test_rig_summary_per_finger_and_focal_spread():
 def test_rig_summary_of_too_few_captures_is_empty_not_an_error():
     summary = summarize_real(_records([(45, 45)], ["1_1"]))
     assert summary["rig"] == {} and math.isnan(summary["rig_deviation_median_deg"])
+
+
+def _fused(turns_deg, registered=True):
+    """A stand-in fuse result: one camera per turn (deg about y)."""
+    cameras = []
+    for angle in turns_deg:
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("y", angle, degrees=True).as_matrix()
+        cameras.append(Camera.from_focal(1000.0, 64, 48, pose))
+    return SimpleNamespace(cameras=cameras, registered=registered)
+
+
+def test_two_view_turn_errors_compare_each_pair_alone_with_the_same_pair_in_all_views():
+    three = _fused([0.0, 45.0, -44.0])
+    twos = {"01": _fused([10.0, 62.0]), "02": _fused([0.0, -44.0]), "12": _fused([0.0, 0.0], registered=False)}
+    errors = two_view_turn_errors(three, twos)
+    assert errors["01"] == pytest.approx(7.0) and errors["02"] == pytest.approx(0.0, abs=1e-6)
+    assert errors["12"] is None  # not registered: no turn to compare, never a 0
+    records = _records([(45, 45), (45, 45)], ["1_1", "2_2"])
+    records[0]["two_view_turn_error_deg"] = errors
+    records[1]["two_view_turn_error_deg"] = {"01": 3.0, "02": 1.0, "12": None}
+    summary = summarize_real(records)["two_views"]
+    assert summary["01"] == {"registered": 2, "captures": 2, "median_deg": pytest.approx(5.0), "max_deg": pytest.approx(7.0)}
+    assert summary["12"]["registered"] == 0 and summary["12"]["median_deg"] is None
+    table = two_view_table({"two_views": summary})
+    assert "| 0, 1 | 2 of 2 | 5.00 (7.00) |" in table and "| 1, 2 | 0 of 2 | – |" in table
 
 
 def _square(x):

@@ -1,6 +1,7 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
+                                [--two-views] [--focal-px F]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
@@ -16,21 +17,22 @@ from pathlib import Path
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
 
 
-def _measure(job, guided_rounds: int, ridge_px: float) -> dict:
+def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px: float | None) -> dict:
     from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.experiments.real import measure_real
     from fingersplat3d.io.jobs import load_job
     from fingersplat3d.pipeline import FuseConfig
 
     capture = load_job(job)
-    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None)
-    return measure_real(capture, config, leave_one_out=True) | {"capture": job.name}
+    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
+                        focal_px=focal_px)
+    return measure_real(capture, config, leave_one_out=True, two_views=two_views) | {"capture": job.name}
 
 
 def main() -> int:
     from fingersplat3d.eval.machine import machine
     from fingersplat3d.experiments.process import in_fresh_process
-    from fingersplat3d.experiments.real import real_table, summarize_real
+    from fingersplat3d.experiments.real import real_table, summarize_real, two_view_table
     from fingersplat3d.io.jobs import list_jobs
     from fingersplat3d.working_scale import RIDGE_PX
 
@@ -41,6 +43,9 @@ def main() -> int:
     parser.add_argument("--ridge-px", type=float, default=RIDGE_PX,
                         help=f"working pixels per ridge period (default {RIDGE_PX:g}; 0: the photos' own resolution)")
     parser.add_argument("--json", type=Path, help="write every figure here")
+    parser.add_argument("--two-views", action="store_true",
+                        help="also fuse every pair of views alone and compare its turn with the three-view fuse's")
+    parser.add_argument("--focal-px", type=float, help="the cameras' focal in the photos' pixels, kept (fs3d fuse --focal-px)")
     args = parser.parse_args()
     if not args.data.is_dir():
         print(f"bench_real: {args.data}: no such folder (the real dev captures live in ../shared/data/uwa-real-dev)",
@@ -48,7 +53,7 @@ def main() -> int:
         return 2
     records = []
     for job in list_jobs([args.data], args.select):
-        records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px))
+        records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px, args.two_views, args.focal_px))
         r = records[-1]
         print(f"{job.name}: {r['registered']}/3 registered, angles {', '.join(f'{v:.1f}' for v in r['angles_deg'].values())}, "
               f"focal {r['focal']:.0f}, {r['seconds']:.1f} s", file=sys.stderr, flush=True)
@@ -60,6 +65,8 @@ def main() -> int:
     print(real_table(records, summary))
     print(f"\nFocal spread {100 * summary['focal_spread']:.0f} %; rig deviation over all pairs: median "
           f"{summary['rig_deviation_median_deg']:.2f}°, max {summary['rig_deviation_max_deg']:.2f}°.")
+    if args.two_views:
+        print("\n" + two_view_table(summary))
     if args.json:
         args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary}, indent=1, default=float))
     return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import EXIT_INCOMPLETE, InputError
 from .options import add_dataset_arguments, add_splat_arguments, fuse_config, read_rig
-from .types import number
+from .types import POSITIVE, number
 
 __all__ = ["add", "run"]
 
@@ -25,6 +25,8 @@ def add(commands) -> None:
     add_dataset_arguments(batch)
     batch.add_argument("-o", "--output", type=Path, required=True, help="folder of the capture folders and results")
     batch.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': fixed camera poses and focal")
+    batch.add_argument("--focal-px", type=POSITIVE,
+                       help="the cameras' focal length in the photos' pixels, when known: kept instead of fitted per capture")
     batch.add_argument("--device", default="cpu",
                        help="where each capture's splat fit runs: cpu (default) or cuda (each task then declares one GPU)")
     add_splat_arguments(batch)
@@ -43,7 +45,9 @@ def run(args: argparse.Namespace) -> int:
     jobs = list_jobs(args.dataset, args.select)
     if args.device not in ("cpu", "cuda") and not args.device.startswith("cuda:"):
         raise InputError(f"--device {args.device!r}: use cpu or cuda")
-    config = replace(fuse_config(args), device=args.device)
+    if args.rig is not None and args.focal_px is not None:
+        raise InputError("a rig (--rig) holds its own focal; leave out --focal-px")
+    config = replace(fuse_config(args), device=args.device, focal_px=args.focal_px)
     options = BatchOptions(fuse=config, render=0 if args.no_splat else args.render_count, rig=read_rig(args.rig),
                            threads=args.threads_per_task, force=args.force)
     run = run_batch(jobs, args.output, options, address=args.address, num_cpus=args.workers, retry_failed=args.retry_failed)

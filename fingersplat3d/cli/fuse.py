@@ -54,6 +54,9 @@ def add(commands) -> None:
     fuse.add_argument("--alignment-solver", choices=("lm", "lbfgs"), default=GlobalAlignConfig.solver,
                       help="global alignment solver: lm (Levenberg-Marquardt, default) or lbfgs (slower to converge; "
                            "measured in docs/measurements.md)")
+    fuse.add_argument("--focal-px", type=POSITIVE,
+                      help="the cameras' focal length in the photos' pixels, when known: kept instead of fitted (two "
+                           "views cannot fix it, and their turn follows it; see docs/measurements.md)")
     fuse.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': keep its camera poses and focal fixed "
                                                "(the views are its cameras in order)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -79,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
                                                                      solver=args.alignment_solver))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
-                        px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
+                        focal_px=args.focal_px, px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
                         splat=splat_config(args), ridge_px=ridge_px(args))
     rig = read_rig(args.rig)
     start = time.perf_counter()

@@ -89,8 +89,27 @@ def leave_one_view_out(three, two) -> dict:
     return texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
 
 
-def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
-    """One real capture fused (geometry only unless ``config`` says otherwise): a record for :func:`summarize_real`."""
+def two_view_turn_errors(three, twos: dict) -> dict:
+    """Per view pair ``"ij"``: how far the turn of a fuse of views i and j alone (``twos["ij"]``) lies from the same
+    pair's turn in the fuse of all views ``three`` (degrees; None where the pair did not register)."""
+    from ..eval.poses import rotation_angle_deg
+
+    errors = {}
+    for key, two in twos.items():
+        i, j = int(key[0]), int(key[1])
+        if not (three.registered and two.registered):
+            errors[key] = None
+            continue
+        own = two.cameras[1].world_to_cam[:3, :3] @ two.cameras[0].world_to_cam[:3, :3].T
+        joint = three.cameras[j].world_to_cam[:3, :3] @ three.cameras[i].world_to_cam[:3, :3].T
+        errors[key] = float(rotation_angle_deg(own, joint))
+    return errors
+
+
+def measure_real(capture, config=None, leave_one_out: bool = False, two_views: bool = False) -> dict:
+    """One real capture fused (geometry only unless ``config`` says otherwise): a record for :func:`summarize_real`.
+    ``two_views``: also every pair of views fused alone, against the same turn with all three
+    (:func:`two_view_turn_errors`)."""
     from ..eval.poses import rotation_angle_deg
     from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
@@ -111,9 +130,15 @@ def measure_real(capture, config=None, leave_one_out: bool = False) -> dict:
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
               "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
                              for i in range(len(rotations)) for j in range(i + 1, len(rotations))}}
+    twos = {}
+    if (leave_one_out or two_views) and len(capture) == 3:
+        twos["01"] = fuse(Capture(capture.views[:2], capture.metadata), config)
     if leave_one_out and len(capture) == 3:
-        two = fuse(Capture(capture.views[:2], capture.metadata), config)
-        record["leave_one_out"] = leave_one_view_out(three, two)
+        record["leave_one_out"] = leave_one_view_out(three, twos["01"])
+    if two_views and len(capture) == 3:
+        for i, j in ((0, 2), (1, 2)):
+            twos[f"{i}{j}"] = fuse(Capture((capture.views[i], capture.views[j]), capture.metadata), config)
+        record["two_view_turn_error_deg"] = two_view_turn_errors(three, twos)
     return record
 
 
@@ -136,7 +161,21 @@ def summarize_real(records: list[dict]) -> dict:
             "rig_deviation_max_deg": float(np.max(deviations)) if deviations else nan,
             "focal_spread": float((focals.max() - focals.min()) / np.median(focals)) if len(focals) > 1 else nan,
             "fuse_s_median": float(np.median([r["seconds"] for r in records])) if records else nan,
-            "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan)}
+            "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan),
+            "two_views": _two_view_summary(records)}
+
+
+def _two_view_summary(records: list[dict]) -> dict:
+    """Per view pair, over the captures measured with ``two_views``: how many registered alone, and the median and
+    largest turn error against the three-view fuse."""
+    summary = {}
+    for record in records:
+        for pair, error in record.get("two_view_turn_error_deg", {}).items():
+            summary.setdefault(pair, []).append(error)
+    return {pair: {"registered": sum(e is not None for e in errors), "captures": len(errors),
+                   "median_deg": float(np.median([e for e in errors if e is not None])) if any(e is not None for e in errors) else None,
+                   "max_deg": max((e for e in errors if e is not None), default=None)}
+            for pair, errors in summary.items()}
 
 
 def real_table(records: list[dict], summary: dict) -> str:
@@ -172,4 +211,13 @@ def real_table(records: list[dict], summary: dict) -> str:
         for finger, medians in summary.get("by_finger", {}).items():
             values = " / ".join(f"{medians[p]:.2f}" for p in ("01", "02", "12"))
             lines.append(f"| median, finger {finger} | | | {values} | | | | | |")
+    return "\n".join(lines)
+
+
+def two_view_table(summary: dict) -> str:
+    """Two views fused alone, per view pair: registered captures and turn error against all three views."""
+    lines = ["| views fused alone | registered | turn error ° against the three-view fuse, median (max) |", "|---|---|---|"]
+    for pair, entry in summary.get("two_views", {}).items():
+        error = "–" if entry["median_deg"] is None else f"{entry['median_deg']:.2f} ({entry['max_deg']:.2f})"
+        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} |")
     return "\n".join(lines)

@@ -86,7 +86,13 @@ class PriorBackend:
     proportional to ``n_z`` weighs residuals by their expected accuracy; ~2/3 of a finger's
     pixels face the camera better than 0.8 and get 1."""
 
+    focal_px: float | None = None
+    """The cameras' focal length in pixels when it is known (``fs3d fuse --focal-px``); it replaces the guess."""
+
     def __post_init__(self) -> None:
+        if self.focal_px is not None and not (isinstance(self.focal_px, (int, float)) and math.isfinite(self.focal_px)
+                                              and self.focal_px > 0):
+            raise InputError(f"prior backend: focal_px must be a positive number of pixels, got {self.focal_px!r}")
         checks = (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
                   ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))
         for field_name, low, high, low_allowed in checks:
@@ -109,7 +115,7 @@ class PriorBackend:
             mask = finger_mask(view.image, name=f"view {view.name!r}")
         elif not mask.any():
             raise InputError(f"view {view.name!r}: the mask is empty")
-        focal = self.focal_factor * max(view.width, view.height)
+        focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
                                focal if self.perspective else None)
         points = height_to_points(relief.height, mask, focal)
