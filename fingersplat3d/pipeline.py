@@ -299,9 +299,12 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
                                           for a in range(len(names)) for b in range(a + 1, len(names)) if np.isfinite(sigma[a, b])}
         loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
         if loose:
+            focal_fitted = sum(alignment.aligned) == 2 and report.get("settings", {}).get("focal_px") is None
             _warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
                   + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
-                  "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)")
+                  "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
+                  + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
+                     "cameras' focal with --focal-px if it is known, or add a view" if focal_fitted else ""))
     _check_turns_against_widths(capture, alignment, status, report)
     return status
 

@@ -150,6 +150,8 @@ def test_two_views_90_degrees_apart_register_through_the_unwrapped_texture(uwa):
     errors = relative_rotation_errors([c.world_to_cam for c in result.cameras], [uwa["left"].camera.world_to_cam,
                                                                                  uwa["right"].camera.world_to_cam])
     assert errors[0] < 8  # two views keep the bas-relief ambiguity (measured 3.3 degrees)
+    # ... and cannot fix the focal: the warning says what would
+    assert any("--focal-px" in warning for warning in result.report["warnings"])
 
 
 def test_views_of_different_fingers_are_not_registered(capsys):
@@ -294,6 +296,7 @@ def test_a_known_focal_is_kept_and_fixes_the_turn_of_two_views(uwa):
     assert all(c.K[0, 0] == pytest.approx(focal) for c in result.cameras)  # in the photos' pixels, as given
     error = relative_rotation_errors([c.world_to_cam for c in result.cameras], [v.camera.world_to_cam for v in uwa.views[:2]])
     assert max(error) < 1.5
+    assert not any("--focal-px" in warning for warning in result.report["warnings"])
 
 
 @pytest.mark.parametrize("factor", [1e-3, 1e4])
