@@ -32,6 +32,7 @@ distance-transform inflation, are measured in ``tools/bench_prior.py`` on synthe
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, Sequence
 
@@ -90,17 +91,14 @@ class PriorBackend:
     """The cameras' focal length in pixels when it is known (``fs3d fuse --focal-px``); it replaces the guess."""
 
     def __post_init__(self) -> None:
-        if self.focal_px is not None and not (isinstance(self.focal_px, (int, float)) and math.isfinite(self.focal_px)
-                                              and self.focal_px > 0):
-            raise InputError(f"prior backend: focal_px must be a positive number of pixels, got {self.focal_px!r}")
         checks = (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
                   ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))
+        if self.focal_px is not None:
+            checks += (("focal_px", 0.0, math.inf, False),)
         for field_name, low, high, low_allowed in checks:
             value = getattr(self, field_name)
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                number = math.nan
+            # a number, not text that reads as one ("3" would repeat a string where the focal multiplies)
+            number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
             if not (math.isfinite(number) and (number >= low if low_allowed else number > low) and number <= high):
                 interval = f"{'[' if low_allowed else '('}{low:g}, {'inf)' if high == math.inf else f'{high:g}]'}"
                 raise InputError(f"prior backend: {field_name} must be a finite number in {interval}, got {value!r}")
