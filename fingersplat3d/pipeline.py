@@ -30,7 +30,8 @@ from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
 from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, map_on_grid, working_views
 
-__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX"]
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX",
+           "refuse_focal_with_rig"]
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
@@ -240,6 +241,12 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
                         config.registration.global_align)
 
 
+def refuse_focal_with_rig(focal_px: float | None, rig: Rig | None) -> None:
+    """A known focal and a rig cannot both hold the cameras' focal: one sentence, before any work."""
+    if focal_px is not None and rig is not None:
+        raise InputError("a rig (--rig) holds its own focal; leave out --focal-px")
+
+
 def _check_rig(capture: Capture, rig: Rig) -> None:
     if len(capture) != len(rig.names):
         raise InputError(f"the rig has {len(rig.names)} cameras ({', '.join(rig.names)}) but the capture has "
@@ -418,8 +425,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         raise InputError("fs3d fuse needs at least one image")
     if rig is not None:
         _check_rig(capture, rig)
-        if config.focal_px is not None:
-            raise InputError("a rig (--rig) holds its own focal; leave out --focal-px")
+        refuse_focal_with_rig(config.focal_px, rig)
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}

@@ -41,12 +41,12 @@ def run(args: argparse.Namespace) -> int:
     from ..batch.run import run_batch
     from ..batch.task import BatchOptions
     from ..io.jobs import list_jobs
+    from ..pipeline import refuse_focal_with_rig
 
     jobs = list_jobs(args.dataset, args.select)
     if args.device not in ("cpu", "cuda") and not args.device.startswith("cuda:"):
         raise InputError(f"--device {args.device!r}: use cpu or cuda")
-    if args.rig is not None and args.focal_px is not None:
-        raise InputError("a rig (--rig) holds its own focal; leave out --focal-px")
+    refuse_focal_with_rig(args.focal_px, args.rig)
     config = replace(fuse_config(args), device=args.device, focal_px=args.focal_px)
     options = BatchOptions(fuse=config, render=0 if args.no_splat else args.render_count, rig=read_rig(args.rig),
                            threads=args.threads_per_task, force=args.force)
