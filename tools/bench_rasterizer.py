@@ -1,11 +1,11 @@
 """Throughput of the fast rasterizer on a finger-like scene.
 
     python tools/bench_rasterizer.py [--quick] [--out FILE.md] [--repeats 5] [--threads 2]
-                                     [--paths numba,compiled,eager] [--tile-size 4]
+                                     [--paths numba,compiled,eager] [--tile-size 4] [--device cuda]
 
 Paths: ``numba`` = the compiled CPU kernels (``backend="numba"``, the default on the CPU, early
 termination at 1e-4), ``compiled`` = the torch backend through torch.compile, ``eager`` = the
-torch backend as it is.
+torch backend as it is, ``gsplat`` = gsplat's CUDA kernels (``--device cuda``, gsplat installed).
 
 The scene is a fitted-surface stand-in: Gaussians spread evenly over the camera-facing half of a
 cylinder (a finger, axis vertical) that fills ~40 % of a 640x512 image, flat disks tangent to the
@@ -84,19 +84,29 @@ def count_pairs(scene, tile_size: int, zoom: int = 1) -> tuple[int, int, float]:
     return pairs, evaluated, covered
 
 
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 def time_render(scene, repeats: int, tile_size: int, path: str, zoom: int = 1) -> tuple[float, float, float]:
     """(median forward s, median backward s, fastest forward+backward s) of a render plus a loss."""
     leaves = [t.clone().requires_grad_() for t in scene[:5]] + list(scene[5:])
+    device = leaves[0].device
+    backend = path if path in ("numba", "gsplat") else "torch"
     forward, backward = [], []
     for _ in range(repeats + 1):  # the first is a warm-up (and compiles, for the compiled path)
         for t in leaves[:5]:
             t.grad = None
+        _sync(device)
         start = time.perf_counter()
         out = rasterize(*leaves, WIDTH * zoom, HEIGHT * zoom, tile_size=tile_size, compiled=path == "compiled",
-                        backend="numba" if path == "numba" else "torch")
+                        backend=backend)
         loss = out.color.sum() + out.depth.sum()
+        _sync(device)
         middle = time.perf_counter()
         loss.backward()
+        _sync(device)
         end = time.perf_counter()
         forward.append(middle - start)
         backward.append(end - middle)
@@ -130,7 +140,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--tile-size", type=int, default=4)
-    parser.add_argument("--paths", default="numba,compiled,eager", help="comma-separated: numba, compiled, eager")
+    parser.add_argument("--paths", default="numba,compiled,eager",
+                        help="comma-separated: numba, compiled, eager, gsplat (CUDA)")
+    parser.add_argument("--device", default="cpu", help="cpu (default) or cuda: where the scene lives")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -139,7 +151,8 @@ def main() -> None:
     start_load = tuple(round(x, 2) for x in info["load"])
     header = ("| path | N | scale x | image | covered | pairs (M) | evaluated (M) | forward s | backward s | fwd+bwd s (best) | "
               "fwd+bwd / calibration | fwd Mpairs/s | bwd Mpairs/s | load |")
-    lines = [(f"Machine: {info['cpu']}, {info['cores']} cores, torch {info['torch']}, {args.threads} threads, "
+    gpu = f", GPU {info['gpu']} (scene on {args.device})" if args.device != "cpu" else ""
+    lines = [(f"Machine: {info['cpu']}, {info['cores']} cores{gpu}, torch {info['torch']}, {args.threads} threads, "
               f"tile {args.tile_size}, load average at start {start_load}"), "", header,
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     calibration = calibration_seconds(args.repeats)
@@ -151,7 +164,7 @@ def main() -> None:
                   (200_000, 2.0, 1), (200_000, 4.0, 1), (200_000, 1.0, 2), (400_000, 1.0, 2), (800_000, 1.0, 2)]
     for path in args.paths.split(","):
         for n, factor, zoom in cases:
-            scene = finger_scene(n, factor, zoom=zoom)
+            scene = tuple(t.to(args.device) for t in finger_scene(n, factor, zoom=zoom))
             pairs, evaluated, covered = count_pairs(scene, args.tile_size, zoom)
             fwd, bwd, best = time_render(scene, args.repeats, args.tile_size, path, zoom)
             evaluated_text = "–" if path == "numba" else f"{evaluated / 1e6:.1f}"

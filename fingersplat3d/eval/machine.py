@@ -1,4 +1,4 @@
-"""The machine every benchmark names: CPU, cores (and those this process may use), load, library versions.
+"""The machine every benchmark names: CPU, cores (and those this process may use), GPU, load, library versions.
 
 Used by ``fs3d bench`` and ``tools/bench_*.py``; no files written.
 """
@@ -32,4 +32,14 @@ def machine() -> dict:
 
     return {"cpu": model, "cores": os.cpu_count(), "usable_cores": cpu_threads(), "load": os.getloadavg(), "python": platform.python_version(),
             "numpy": _version("numpy"), "open3d": _version("open3d"), "torch": _version("torch"),
-            "kernel": platform.release()}
+            "kernel": platform.release(), "gpu": _gpu()}
+
+
+def _gpu() -> str:
+    """The first CUDA device's name, or "none" (torch is imported only if it already was)."""
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is None or not torch.cuda.is_available():
+        return "none"
+    return torch.cuda.get_device_name(0)

@@ -90,7 +90,8 @@ class SplatConfig:
     """Near plane as a fraction of the camera-to-finger distance."""
     rasterizer: str = "auto"
     """Rasterizer backend while fitting (:func:`~fingersplat3d.splat.rasterize.rasterize`): ``auto``
-    (the compiled ``numba`` kernels on the CPU, ``torch`` on a GPU), ``numba`` or ``torch``."""
+    (the compiled ``numba`` kernels on the CPU; on a GPU gsplat's kernels when installed, else ``torch``),
+    ``numba``, ``torch`` or ``gsplat``."""
     seed: int = 0
     """Seed of the view order and of densification."""
 

@@ -18,11 +18,12 @@ from torch import Tensor
 
 from .binning import bin_gaussians
 from .composite import EAGER_KERNELS, composite_tiles
+from .gsplat_backend import rasterize_gsplat, why_not_usable
 from .project import _check, _project
 
 __all__ = ["BACKENDS", "RenderOutput", "rasterize", "resolve_backend"]
 
-BACKENDS = ("auto", "numba", "torch")
+BACKENDS = ("auto", "numba", "torch", "gsplat")
 MIN_TRANSMITTANCE = 1e-4
 """Early termination of the ``numba`` backend: a pixel stops after the Gaussian that brings its
 transmittance below this (3DGS and gsplat stop before it), so what it leaves out weighs less than
@@ -40,14 +41,21 @@ class RenderOutput(NamedTuple):
     depths: Tensor  # [N] camera z of each centre
 
 
-def resolve_backend(backend: str, device: torch.device) -> str:
-    """``auto`` -> ``numba`` for CPU tensors, ``torch`` elsewhere; ``numba`` needs CPU tensors."""
+def resolve_backend(backend: str, device: torch.device, means: Tensor | None = None, K: Tensor | None = None) -> str:
+    """``auto`` -> ``numba`` for CPU tensors; elsewhere ``gsplat`` where it can render ``means`` and ``K``
+    (:func:`.gsplat_backend.why_not_usable`; given both), else ``torch``. ``numba`` needs CPU tensors,
+    ``gsplat`` usable inputs."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    gsplat_reason = why_not_usable(means, K) if means is not None and K is not None else "no inputs given"
     if backend == "auto":
-        return "numba" if device.type == "cpu" else "torch"
+        if device.type == "cpu":
+            return "numba"
+        return "gsplat" if gsplat_reason is None else "torch"
     if backend == "numba" and device.type != "cpu":
         raise ValueError(f"the numba backend runs on the CPU; these tensors are on {device}")
+    if backend == "gsplat" and gsplat_reason is not None:
+        raise ValueError(f"the gsplat backend cannot render these inputs: {gsplat_reason}")
     return backend
 
 
@@ -94,15 +102,22 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
     ``backend``: ``numba`` composites with the compiled CPU kernels (:mod:`.cpu_composite`: exact
     ellipse-tile overlap, early termination at ``min_transmittance``; 0 gives the exact sum),
     ``torch`` with the tensor kernels (any device, exact sum, ``tile_size``/``compiled`` apply),
-    ``auto`` = ``numba`` for CPU tensors, ``torch`` elsewhere.
+    ``gsplat`` with gsplat's CUDA kernels (:mod:`.gsplat_backend`: alpha capped at 0.999, early
+    termination at 1e-4, no gradient to ``K``, float32), ``auto`` = ``numba`` for CPU tensors, on a GPU
+    ``gsplat`` when it is installed and can render the inputs, else ``torch``.
     """
     check_render_inputs(means, quats, scales, opacities, colors, world_to_cam, K, width, height, near,
                         background, low_pass)
     if int(tile_size) != tile_size or tile_size < 1:
         raise ValueError(f"tile_size must be a positive integer, got {tile_size}")
-    backend = resolve_backend(backend, means.device)
+    backend = resolve_backend(backend, means.device, means, K)
     width, height = int(width), int(height)
     channels = colors.shape[1]
+    if backend == "gsplat":
+        out = rasterize_gsplat(means, quats, scales, opacities, colors, world_to_cam, K, width, height, float(near),
+                               float(low_pass))
+        color, depth = finish_render(out.features[..., :channels], out.alpha, out.features[..., channels], background)
+        return RenderOutput(color, out.alpha, depth, out.means2d, out.radii, out.depths)
     if backend == "numba":
         from .cpu_raster import composite_cpu, project_cpu
 
