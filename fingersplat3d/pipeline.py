@@ -36,6 +36,7 @@ __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reco
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
+MAX_TURN_SENSITIVITY_DEG = 1.5  # a pair turn that moves more than this under the focal probe is warned about
 MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
 
 
@@ -301,9 +302,7 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
         _warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than {MAX_RESIDUAL_PX:g} px): "
                       "the cameras are probably wrong")
     if alignment.turn_uncertainty_deg is not None:
-        sigma = alignment.turn_uncertainty_deg
-        status["turn_uncertainty_deg"] = {f"{names[a]}-{names[b]}": round(float(sigma[a, b]), 3)
-                                          for a in range(len(names)) for b in range(a + 1, len(names)) if np.isfinite(sigma[a, b])}
+        status["turn_uncertainty_deg"] = _per_pair(names, alignment.turn_uncertainty_deg, 3)
         loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
         if loose:
             focal_fitted = sum(alignment.aligned) == 2 and report.get("settings", {}).get("focal_px") is None
@@ -312,8 +311,22 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
                   "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
                   + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
                      "cameras' focal with --focal-px if it is known, or add a view" if focal_fitted else ""))
+    if alignment.turn_sensitivity_deg is not None:
+        status["turn_sensitivity_deg"] = _per_pair(names, alignment.turn_sensitivity_deg, 2)
+        loose = {pair: value for pair, value in status["turn_sensitivity_deg"].items() if value > MAX_TURN_SENSITIVITY_DEG}
+        if loose:
+            _warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
+                  + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
+                  f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "
+                  "the cameras' focal (--focal-px, --rig) or more views fix it")
     _check_turns_against_widths(capture, alignment, status, report)
     return status
+
+
+def _per_pair(names: Sequence[str], values: np.ndarray, digits: int) -> dict[str, float]:
+    """``{"a-b": value}`` for every view pair with a finite entry of the ``[N, N]`` table ``values``."""
+    return {f"{names[a]}-{names[b]}": round(float(values[a, b]), digits)
+            for a in range(len(names)) for b in range(a + 1, len(names)) if np.isfinite(values[a, b])}
 
 
 def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, status: dict, report: dict) -> None:

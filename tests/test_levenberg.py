@@ -17,7 +17,7 @@ def capture():
     return synthesize(0, SynthConfig(size=(320, 256))).capture
 
 
-def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3, min_turns=None):
+def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3, min_turns=None, turn_noise=0.01):
     from fingersplat3d.align.solve import global_opt
 
     rng = np.random.default_rng(seed)
@@ -35,18 +35,21 @@ def _problem(capture, config, tilt=0.03, seed=0, noise_px=0.3, min_turns=None):
                                       [rng.normal(0, 0.05, g.size) for g in grids])
     problem, _ = alignment_problem(depths, focal, pairs, config, grids, initial, aligned, root, min_turns)
     with torch.no_grad():
-        problem.omega.add_(torch.as_tensor(rng.normal(0, 0.01, problem.omega.shape)))
+        problem.omega.add_(torch.as_tensor(rng.normal(0, turn_noise, problem.omega.shape)))
     return problem, pairs, depths, focal
 
 
 @pytest.mark.gradcheck
-@pytest.mark.parametrize("shared, bounded", [(True, False), (False, False), (True, True)])
-def test_the_built_jacobian_gives_the_loss_gradient(capture, shared, bounded):
+@pytest.mark.parametrize("shared, bounded, pivot", [(True, False, True), (False, False, True), (True, True, True),
+                                                    (True, False, False)])
+def test_the_built_jacobian_gives_the_loss_gradient(capture, shared, bounded, pivot):
     """2 J^T r (the IRLS system) equals autograd's gradient of the true loss, every unknown included (and the
-    hinge rows of least turns, two of three pairs held below their bound)."""
-    config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared)
+    hinge rows of least turns, two of three pairs held below their bound), with the translation unknowns the pivot
+    in each camera's frame (the chain onto the rotations included) or the camera centres (as a rig holds them)."""
+    config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared, pivot_poses=pivot)
     min_turns = np.array([[np.nan, 1.2, 0.1], [1.2, np.nan, 1.5], [0.1, 1.5, np.nan]]) if bounded else None
     problem, *_ = _problem(capture, config, noise_px=2.0, min_turns=min_turns)  # residuals on both sides of the Cauchy scale
+    assert problem.pivoted == pivot
     assert (problem.turn_bound_rows(problem.omega.detach()) > 0).sum() == (2 if bounded else 0)
     residual, jacobian = _system(problem)
     problem.zero_grad()
@@ -106,6 +109,10 @@ def test_fuse_reports_the_turn_uncertainty_of_every_pair(capture):
     report = fuse(blind, FuseConfig(splat=None)).report["alignment"]
     assert set(report["turn_uncertainty_deg"]) == {"left-center", "left-right", "center-right"}
     assert all(0 < value < 5 for value in report["turn_uncertainty_deg"].values())
+    assert set(report["turn_sensitivity_deg"]) == set(report["turn_uncertainty_deg"])
+    assert all(0 <= value < 5 for value in report["turn_sensitivity_deg"].values())
+    known = fuse(blind, FuseConfig(splat=None, focal_px=float(capture.views[0].camera.K[0, 0]))).report["alignment"]
+    assert "turn_sensitivity_deg" not in known  # a known focal is held: nothing to probe
 
 
 def test_the_solved_turns_keep_to_their_bounds(capture):
@@ -170,3 +177,66 @@ def test_left_jacobian_is_the_exponential_maps_first_order():
         moved = axis_angle_to_matrix(w + d)
         predicted = axis_angle_to_matrix(left_jacobian(w) @ d) @ axis_angle_to_matrix(w)
         assert torch.allclose(moved, predicted, atol=1e-11)
+
+
+def test_pivoted_cameras_start_where_they_were_and_turn_about_the_pivot(capture):
+    """The pivot unknowns reproduce the initial camera centres; a rotation update with the pivot unknowns held turns
+    a camera about the pivot (it stays at the same place in the camera's frame, at the same distance)."""
+    problem, *_ = _problem(capture, GlobalAlignConfig(), turn_noise=0.0)
+    unpivoted, *_ = _problem(capture, GlobalAlignConfig(pivot_poses=False), turn_noise=0.0)
+    with torch.no_grad():
+        torch.testing.assert_close(problem.translations(), unpivoted.translations())
+        pivot = problem.pivot
+        before = torch.einsum("nji,nj->ni", problem.rotations(), pivot - problem.translations())
+        problem.omega.add_(torch.tensor([0.0, 0.4, 0.1], dtype=torch.float64))
+        after = torch.einsum("nji,nj->ni", problem.rotations(), pivot - problem.translations())
+    free = problem.free.bool()
+    torch.testing.assert_close(after[free], before[free])
+    assert not torch.allclose(problem.translations()[free], unpivoted.translations()[free])
+
+
+def test_two_views_keep_the_camera_centres_as_unknowns(capture):
+    rng = np.random.default_rng(0)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03)]
+    depths = [v.depth for v in capture.views[:2]]
+    config = GlobalAlignConfig()
+    grids = field_grids(depths, config)
+    root, tree = spanning_tree(2, pairs)
+    from fingersplat3d.align.solve import global_opt
+
+    rotations, translations, log_scales = global_opt._chain(2, root, tree, pairs, float(np.nanmedian(depths[root])))
+    initial = global_opt.InitialState(rotations, translations, log_scales, np.zeros(2), np.log(np.full(2, 900.0)),
+                                      [np.zeros(g.size) for g in grids])
+    problem, _ = alignment_problem(depths, np.full(2, 900.0), pairs, config, grids, initial, [True, True], root)
+    assert not problem.pivoted
+
+
+def test_a_held_relief_stays_where_it_was_put(capture):
+    problem, *_ = _problem(capture, GlobalAlignConfig(optimize_relief=False), tilt=0.05)
+    held = problem.log_alpha.detach().clone()
+    history = levenberg_marquardt(problem, iterations=10)
+    assert history[-1] < history[0]
+    torch.testing.assert_close(problem.log_alpha.detach(), held)
+
+
+def test_turn_sensitivity_is_small_where_three_views_pin_the_turns_and_large_for_two(capture):
+    """The probe of align/solve/sensitivity.py: three views with exact matches hold their turns while the focal is
+    held off (a fraction of a degree); two views, whose turn follows the focal, move by more."""
+    from fingersplat3d.align.solve.sensitivity import turn_sensitivity_deg
+
+    rng = np.random.default_rng(0)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03),
+             _exact_pair(capture, 0, 2, rng, tilt=0.03)]
+    depths = [v.depth for v in capture.views]
+    focal = capture.views[0].camera.K[0, 0]
+    config = GlobalAlignConfig()
+    three = global_align(depths, focal, pairs, config)
+    moves = turn_sensitivity_deg(three, depths, focal, pairs, config)
+    assert moves.shape == (3, 3) and np.allclose(np.diag(moves), 0) and np.allclose(moves, moves.T)
+    assert np.nanmax(moves) < 1.0
+    two = global_align(depths[:2], focal, pairs[:1], config)
+    two_moves = turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], config)
+    assert two_moves[0, 1] > 3 * np.nanmax(moves)  # measured 4.1 against 0.62
+    assert turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], GlobalAlignConfig(optimize_focal=False)) is None
+    unreached = global_align(depths, focal, pairs[:1], config)  # view 2 has no pair
+    assert np.isnan(turn_sensitivity_deg(unreached, depths, focal, pairs[:1], config)[0, 2])

@@ -31,7 +31,9 @@ def main() -> int:
         return 2
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores; geometry only.\n")
-    print("| rolls ° | views registered | pair errors ° (registered pairs) | residual px |\n|---|---|---|---|")
+    print("| rolls ° | views registered | pair errors ° (registered pairs) | turn sensitivity ° (same pairs) | residual px |\n"
+          "|---|---|---|---|---|")
+    errors_all, moves_all = [], []
     every = tuple(sorted(int(path.stem.split("_")[-1]) for path in args.data.glob("sample2_*.png")
                          if path.stem.split("_")[-1].lstrip("-").isdigit()))
     for rolls in TRIPLETS + ((every,) if len(every) > 3 else ()):
@@ -42,11 +44,25 @@ def main() -> int:
         n = len(rolls)
         errors = [abs(float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3))) - abs(rolls[j] - rolls[i]))
                   for i in range(n) for j in range(i + 1, n) if aligned[i] and aligned[j]]
+        names = result.capture.names
+        sensitivity = result.report["alignment"].get("turn_sensitivity_deg", {})
+        moves = [sensitivity.get(f"{names[i]}-{names[j]}", float("nan"))
+                 for i in range(n) for j in range(i + 1, n) if aligned[i] and aligned[j]]
         if n == 3:
             shown = ", ".join(f"{e:.1f}" for e in errors) or "–"
+            shown_moves = ", ".join(f"{m:.1f}" for m in moves) or "–"
+            errors_all += errors
+            moves_all += moves
         else:  # every view of the sample at once: the pairs' median and worst
             shown = f"median {np.median(errors):.2f}, max {np.max(errors):.2f} ({len(errors)} pairs)" if errors else "–"
-        print(f"| {' / '.join(map(str, rolls))} | {sum(aligned)}/{n} | {shown} | {result.report['alignment']['residual_px']:.2f} |")
+            shown_moves = f"median {np.nanmedian(moves):.2f}, max {np.nanmax(moves):.2f}" if moves else "–"
+        print(f"| {' / '.join(map(str, rolls))} | {sum(aligned)}/{n} | {shown} | {shown_moves} | "
+              f"{result.report['alignment']['residual_px']:.2f} |", flush=True)
+    if len(errors_all) > 2:
+        from scipy.stats import spearmanr
+
+        rho = spearmanr(moves_all, errors_all)
+        print(f"\nTriplets' pairs: turn sensitivity against error, Spearman {rho.statistic:.2f} (p = {rho.pvalue:.2g}).")
     return 0
 
 

@@ -32,7 +32,8 @@ def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px
 def main() -> int:
     from fingersplat3d.eval.machine import machine
     from fingersplat3d.experiments.process import in_fresh_process
-    from fingersplat3d.experiments.real import real_table, summarize_real, two_view_table
+    from fingersplat3d.experiments.real import (real_table, sensitivity_against_deviation, summarize_real,
+                                                two_view_table)
     from fingersplat3d.io.jobs import list_jobs
     from fingersplat3d.working_scale import RIDGE_PX
 
@@ -65,6 +66,10 @@ def main() -> int:
     print(real_table(records, summary))
     print(f"\nFocal spread {100 * summary['focal_spread']:.0f} %; rig deviation over all pairs: median "
           f"{summary['rig_deviation_median_deg']:.2f}°, max {summary['rig_deviation_max_deg']:.2f}°.")
+    how_sure = sensitivity_against_deviation(records, summary)
+    if how_sure:
+        print("\nHow sure, per camera pair (" + ", ".join(f"{k}: Spearman {v['spearman']:.2f} (p = {v['p']:.2g})"
+                                                    for k, v in how_sure.items()) + ") against its rig deviation.")
     if args.two_views:
         print("\n" + two_view_table(summary))
     if args.json:

@@ -24,7 +24,7 @@ registered pair reaches stay unaligned (the caller decides what that means). Pur
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Sequence
 
@@ -43,6 +43,7 @@ from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
+from .solve.sensitivity import turn_sensitivity_deg
 from .width_check import least_turns_deg
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
@@ -247,6 +248,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     align = global_align if rig is None else (lambda d, f, c, cfg, previous=None, min_turns=None:
                                               rig_align(d, f, c, cfg, rig, sizes, previous))
     alignment = align(depths, focals, registered, config.global_align)
+    solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
     # From here on no pair may turn less than its silhouettes allow (a round prior on a flat finger would).
     min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals))
     placed = np.asarray(alignment.aligned, bool)
@@ -276,10 +278,15 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         contours = _contours(alignment, prepared, config) if rig is None else []
         say(f"global alignment, round {rounds}")
         alignment = align(depths, focals, refined + contours, config.global_align, previous=alignment, min_turns=min_turns)
+        solved_with = (refined + contours, min_turns)
         fitted = refined
     photometric = {}
     if rig is None and config.photometric.iterations > 0 and fitted and sum(alignment.aligned) >= config.photometric.min_views:
         say("photometric refinement")
         alignment, photometric = refine_alignment(alignment, depths, focals, fitted, config.global_align, prepared.textures,
                                                   prepared.masks, prepared.period, config.photometric, min_turns)
+    if rig is None and config.global_align.solver == "lm" and sum(alignment.aligned) >= 2:
+        say("how sure: probing the focal")
+        alignment = replace(alignment, turn_sensitivity_deg=turn_sensitivity_deg(alignment, depths, focals, solved_with[0],
+                                                                               config.global_align, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric)

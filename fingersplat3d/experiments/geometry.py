@@ -88,6 +88,8 @@ def score_geometry(result, truth: dict) -> dict:
             "depth_mae_mm": float(np.mean(depths)), "depth_worst_view_mm": float(np.max(depths)),
             "registered_all": bool(all(result.report["alignment"]["aligned"].values())),
             "turn_uncertainty_max_deg": max(result.report["alignment"].get("turn_uncertainty_deg", {}).values(),
+                                            default=float("nan")),
+            "turn_sensitivity_max_deg": max(result.report["alignment"].get("turn_sensitivity_deg", {}).values(),
                                             default=float("nan"))}
 
 

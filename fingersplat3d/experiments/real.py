@@ -21,7 +21,7 @@ import numpy as np
 
 from .process import peak_rss_mb
 
-__all__ = ["measure_real", "summarize_real", "real_table"]
+__all__ = ["measure_real", "summarize_real", "real_table", "sensitivity_against_deviation"]
 
 
 def _texture_seen_from(texture, depth, camera, target_camera, target_mask):
@@ -126,6 +126,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "registered": int(sum(report["alignment"]["aligned"].values())),
               "focal": float(report["alignment"]["focals_px"][0]), "residual_px": report["alignment"].get("residual_px"),
               "turn_uncertainty_deg": report["alignment"].get("turn_uncertainty_deg", {}),
+              "turn_sensitivity_deg": report["alignment"].get("turn_sensitivity_deg", {}),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
               "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
@@ -163,6 +164,28 @@ def summarize_real(records: list[dict]) -> dict:
             "fuse_s_median": float(np.median([r["seconds"] for r in records])) if records else nan,
             "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan),
             "two_views": _two_view_summary(records)}
+
+
+def sensitivity_against_deviation(records: list[dict], summary: dict) -> dict:
+    """How well each "how sure" figure of ``report.json`` ranks the real camera pairs by their rig deviation (the error
+    proxy that needs no ground truth): Spearman's rank correlation over every pair of every three-view capture, for
+    the curvature's ``turn_uncertainty_deg`` and the probes' ``turn_sensitivity_deg``."""
+    from scipy.stats import spearmanr
+
+    result = {}
+    for key in ("turn_uncertainty_deg", "turn_sensitivity_deg"):
+        figures, deviations = [], []
+        for record in records:
+            values = list(record.get(key, {}).values())  # in pair order 0-1, 0-2, 1-2
+            for (pair, entry), value in zip(summary.get("rig", {}).items(), values):
+                deviation = entry["deviation_deg"].get(record["capture"])
+                if deviation is not None and np.isfinite(value):
+                    figures.append(value)
+                    deviations.append(deviation)
+        if len(figures) > 2:
+            rho = spearmanr(figures, deviations)
+            result[key] = {"spearman": float(rho.statistic), "p": float(rho.pvalue), "pairs": len(figures)}
+    return result
 
 
 def _two_view_summary(records: list[dict]) -> dict:

@@ -3,7 +3,13 @@
 Unknowns (float64), in *normalised units* where the root view's median pointmap depth is 1:
 
 * a rigid ``cam_to_world`` per view: a rotation-vector update on the initial rotation and a
-  translation; the root view is fixed (the gauge);
+  translation; the root view is fixed (the gauge). With a ``pivot`` (a point near the finger; the default of
+  :func:`~fingersplat3d.align.solve.global_opt.global_align`), the translation unknown is where the pivot lies in
+  the camera's frame, ``q = R^T (pivot - centre)``, rather than the camera's centre: turning a camera about the
+  finger is then a straight line in the unknowns, where with the centre it is an arc (the centre swings round the
+  finger). The bas-relief valley (turn, relief and focal trading) runs along such turns; on an arc each
+  Gauss-Newton step only follows the tangent, and the fit had stopped partway along it after its 15 steps
+  (another group's crops at rolls 45 degrees apart: 4-8 degrees off, and well within 1 with the fit run to the end);
 * one shared focal length (or one per view), principal point at each image's centre;
 * per view a depth surface on top of the backend's own pointmap depth ``z_v``:
   ``depth_v(p) = s_v (m_v + alpha_v (z_v(p) - m_v) + r_v F_v(p))`` where ``m_v`` is the median
@@ -29,7 +35,7 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
-from ...rotations import axis_angle_to_matrix, rotation_angle
+from ...rotations import axis_angle_to_matrix, left_jacobian, rotation_angle, skew
 from .depth_field import FieldGrid
 
 __all__ = ["Correspondences", "InitialState", "AlignmentProblem"]
@@ -69,7 +75,8 @@ class AlignmentProblem(torch.nn.Module):
                  initial: InitialState, free: Sequence[bool], *, shared_focal: bool, optimize_focal: bool,
                  focal_guess: np.ndarray, robust_px: float, alpha_prior: float, field_smoothness: float,
                  field_prior: float, focal_prior: float, shared_relief: bool = False,
-                 min_turns: np.ndarray | None = None, turn_bound_weight: float = 0.0) -> None:
+                 min_turns: np.ndarray | None = None, turn_bound_weight: float = 0.0, optimize_relief: bool = True,
+                 pivot: np.ndarray | None = None) -> None:
         super().__init__()
         dtype = torch.float64
         n_views = len(depths)
@@ -116,10 +123,16 @@ class AlignmentProblem(torch.nn.Module):
         bend = np.concatenate([t + offsets[v] for v, t in enumerate(triples)]) if triples else np.zeros((0, 3), np.int64)
         buffer("bend_index", bend, torch.long)
         self.omega = torch.nn.Parameter(torch.zeros((n_views, 3), dtype=dtype))
-        self.translation = torch.nn.Parameter(torch.as_tensor(initial.translations, dtype=dtype).clone())
+        self.pivoted = pivot is not None
+        buffer("pivot", np.zeros(3) if pivot is None else np.asarray(pivot, np.float64).reshape(3))
+        translations = np.asarray(initial.translations, np.float64)
+        if self.pivoted:  # the pivot in each camera's frame: q = R^T (pivot - centre)
+            translations = np.einsum("nji,nj->ni", np.asarray(initial.rotations, np.float64), self.pivot.numpy() - translations)
+        self.translation = torch.nn.Parameter(torch.as_tensor(translations, dtype=dtype).clone())
         self.log_scale = torch.nn.Parameter(torch.as_tensor(initial.log_scales, dtype=dtype).clone())
         alphas = np.asarray(initial.log_alphas, np.float64)
-        self.log_alpha = torch.nn.Parameter(torch.as_tensor([alphas.mean()] if shared_relief else alphas, dtype=dtype).clone())
+        self.log_alpha = torch.nn.Parameter(torch.as_tensor([alphas.mean()] if shared_relief else alphas, dtype=dtype).clone(),
+                                            requires_grad=optimize_relief)
         focal = np.asarray(initial.log_focals, np.float64)
         self.log_focal = torch.nn.Parameter(torch.as_tensor([focal.mean()] if shared_focal else focal, dtype=dtype).clone(),
                                             requires_grad=optimize_focal)
@@ -137,8 +150,10 @@ class AlignmentProblem(torch.nn.Module):
         return axis_angle_to_matrix(self.omega * self.free[:, None]) @ self.base_rotation
 
     def translations(self) -> torch.Tensor:
+        """``[N, 3]`` camera centres (the root and unreached views keep their initial ones)."""
         free = self.free[:, None]
-        return self.translation * free + self.base_translation * (1 - free)
+        moving = self.pivot - torch.einsum("nij,nj->ni", self.rotations(), self.translation) if self.pivoted else self.translation
+        return moving * free + self.base_translation * (1 - free)
 
     def scales(self) -> torch.Tensor:
         return torch.exp(self.log_scale * self.free + self.base_log_scale * (1 - self.free))
@@ -242,9 +257,10 @@ class AlignmentProblem(torch.nn.Module):
                 return np.where(fixed < 0, -1, cols)[:, :, None], np.ones((count, width, 1))
 
             columns[f"omega_{end}"] = per_view(at["omega"], 3)
-            columns[f"t_{end}"] = per_view(at["translation"], 3)
+            columns[f"t_{end}"] = per_view(at["translation"], 3)  # the centre's; see pivot_chain when pivoted
             columns[f"ls_{end}"] = per_view(at["log_scale"], 1)
-            columns[f"la_{end}"] = ((at["log_alpha"] + (0 * view if shared_alpha else view))[:, None, None] * ones).astype(np.int64), ones
+            alpha_cols = (at["log_alpha"] + (0 * view if shared_alpha else view))[:, None, None] * ones
+            columns[f"la_{end}"] = (alpha_cols if self.log_alpha.requires_grad else -ones).astype(np.int64), ones
             focal_cols = (at["log_focal"] + (0 * view if shared_focal else view))[:, None, None] * ones
             columns[f"lf_{end}"] = (focal_cols if self.log_focal.requires_grad else -ones).astype(np.int64), ones
             if self.field.numel():
@@ -253,6 +269,19 @@ class AlignmentProblem(torch.nn.Module):
             else:
                 columns[f"f_{end}"] = -ones.astype(np.int64), ones
         return columns
+
+    def pivot_chain(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """How each view's camera centre ``c = pivot - R q`` (``R = Exp(omega) R0``) moves with its unknowns when
+        pivoted: ``dc = [R q]_x J_l(omega) d omega - R dq``, as ``(d c / d omega, d c / d q)`` ``[N, 3, 3]`` each;
+        None when the translation unknown is the centre itself. The Levenberg-Marquardt system applies it to each
+        row's derivative by its centre (:func:`~fingersplat3d.align.solve.levenberg._system`)."""
+        if not self.pivoted:
+            return None
+        with torch.no_grad():
+            omega = self.omega * self.free[:, None]
+            rotations = axis_angle_to_matrix(omega) @ self.base_rotation
+            turned = torch.einsum("nij,nj->ni", rotations, self.translation)
+            return skew(turned) @ left_jacobian(omega), -rotations
 
     def unknowns(self) -> torch.Tensor:
         """Every unknown, flat: omega, translation, log scale, log relief, log focal, field coefficients."""
@@ -287,9 +316,11 @@ class AlignmentProblem(torch.nn.Module):
                 [(at["field"] + bend[:, 0], root), (at["field"] + bend[:, 1], -2 * root), (at["field"] + bend[:, 2], root)])
         if field.size:
             add(np.sqrt(self.field_prior) * field, [(at["field"] + np.arange(field.size), np.sqrt(self.field_prior))])
-        alphas = self.log_alpha.detach().numpy()
-        repeat = self.medians.shape[0] if alphas.size == 1 else 1  # a shared relief is counted once per view
-        add(np.sqrt(self.alpha_prior * repeat) * alphas, [(at["log_alpha"] + np.arange(alphas.size), np.sqrt(self.alpha_prior * repeat))])
+        if self.log_alpha.requires_grad:
+            alphas = self.log_alpha.detach().numpy()
+            repeat = self.medians.shape[0] if alphas.size == 1 else 1  # a shared relief is counted once per view
+            add(np.sqrt(self.alpha_prior * repeat) * alphas,
+                [(at["log_alpha"] + np.arange(alphas.size), np.sqrt(self.alpha_prior * repeat))])
         if self.log_focal.requires_grad:
             guess = (self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess).numpy()
             focal = self.log_focal.detach().numpy()

@@ -71,6 +71,13 @@ class GlobalAlignConfig:
     """One focal length for all views (same camera), else one per view."""
     optimize_focal: bool = True
     """Let the focal move away from the guess (needs >= 2 views with parallax)."""
+    optimize_relief: bool = True
+    """Let the relief scale move (held only by the probes of :mod:`~fingersplat3d.align.solve.sensitivity`)."""
+    pivot_poses: bool = True
+    """Each camera's translation unknown is where a point of the finger (on the root view's axis at its median depth)
+    lies in the camera's frame, so that turning about the finger is a straight line in the unknowns
+    (:class:`~fingersplat3d.align.solve.alignment_problem.AlignmentProblem`). Measured on another group's crops at
+    rolls 45 degrees apart (docs/measurements.md): the wide triplets' worst pairs 5.7-9.8 -> ... degrees."""
     field_knots: float = 8.0
     """Knot intervals of each view's depth field across the finger's short side (0 = no field)."""
     field_smoothness: float = 0.05
@@ -86,8 +93,17 @@ class GlobalAlignConfig:
     solver: str = "lm"
     """``lm``: Levenberg-Marquardt on the sparse Jacobian (:mod:`~fingersplat3d.align.solve.levenberg`);
     ``lbfgs``: Adam (``iterations``) then L-BFGS (``polish_*``), which converges slowly on this problem."""
-    lm_iterations: int = 15
-    """Levenberg-Marquardt steps per round at most (it stops when the loss no longer falls)."""
+    lm_iterations: int = 40
+    """Levenberg-Marquardt steps per round at most (it stops when the loss falls by less than ``lm_tolerance`` of
+    itself in a step). Along the bas-relief valley the fit needs 20-40 steps: at 15 it had stopped partway on another
+    group's crops at rolls 45 degrees apart, and on the real captures in one round of three."""
+    lm_tolerance: float = 1e-4
+    """The relative fall of the loss under which a round stops (1e-5 gave the same turns, 20 % slower)."""
+    two_view_lm_iterations: int = 15
+    """The same cap with fewer than :data:`PIVOT_MIN_VIEWS` views aligned: their valley is open, the data do not say
+    where along it the turn lies, and the pair's own similarity the fit starts from is nearer the truth than where
+    the priors stop a longer fit (synthetic ring, two views: 0.89 degrees at 15 steps; real, frames 0 and 1 alone
+    carried into frame 2: texture correlation 0.12 at 15, 0.07 at 40)."""
     turn_bound_weight: float = 1e3
     """Weight of the hinge rows that keep each view pair turned at least as far as their silhouette widths allow
     (``min_turns`` of :func:`global_align`; :mod:`~fingersplat3d.align.width_check`)."""
@@ -95,6 +111,13 @@ class GlobalAlignConfig:
     """One relief scale for all views (they see one finger) instead of one per view. Measured (README,
     5 seeds): rotation error median on synthetic ``cfpose`` 3.93 -> 3.35 deg, ``uwa`` 1.99 -> 2.01 deg;
     real rig consistency 2.91 / 3.74 / 4.90 -> 2.38 / 1.83 / 3.01 deg."""
+
+
+PIVOT_MIN_VIEWS = 3
+"""Views a capture needs for :attr:`GlobalAlignConfig.pivot_poses`. Two views leave the bas-relief valley open (their
+turn and the relief trade with no data against it); pivoted, the fit slides along it to where the priors stop it,
+further from the truth than the pair's own similarity it starts from (synthetic ring, two views 45 degrees apart: 0.89
+-> 4.98 degrees, 3 seeds), so two views keep the camera centres as unknowns."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,6 +141,9 @@ class GlobalAlignment:
     turn_uncertainty_deg: np.ndarray | None = None
     """``[N, N]``: each view pair's rotation uncertainty from the fit's curvature (degrees; NaN for a view
     not aligned), where the solver gives one (Levenberg-Marquardt); None otherwise."""
+    turn_sensitivity_deg: np.ndarray | None = None
+    """``[N, N]``: how far each view pair's turn moves when the focal or the relief is held off its solved value
+    (degrees; :mod:`~fingersplat3d.align.solve.sensitivity`), where the registration probed it; None otherwise."""
 
     @property
     def world_to_cam(self) -> list[np.ndarray]:
@@ -200,12 +226,13 @@ def _correspondences(depths: Sequence[np.ndarray], pairs: Sequence[PairCorrespon
 def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[float],
                  pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig = GlobalAlignConfig(),
                  root: int | None = None, previous: GlobalAlignment | None = None,
-                 min_turns: np.ndarray | None = None) -> GlobalAlignment:
+                 min_turns: np.ndarray | None = None, uncertainty: bool = True) -> GlobalAlignment:
     """Align views given own-frame pointmap depths ``depths[v] [H, W]`` (NaN = none) and pair correspondences.
 
     ``focal_guess``: the focal (pixels) the pointmaps were made with (one, or one per view).
     ``previous``: refine from this alignment (same views and depths) instead of the spanning tree.
     ``min_turns``: ``[N, N]`` radians, the least turn each view pair may have (NaN: none), kept by hinge rows.
+    ``uncertainty``: also each pair's turn uncertainty from the solved curvature (Levenberg-Marquardt only).
     Views that no pair reaches keep an identity pose and are marked not aligned.
     """
     n_views = len(depths)
@@ -230,17 +257,19 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
                                [np.zeros(g.size) for g in grids])
     problem, data = alignment_problem(depths, guesses, pairs, config, grids, initial, aligned, root, min_turns)
     with single_threaded():  # a few thousand residuals: threads only add hand-offs
-        uncertainty = None
+        curvature = None
         if not len(data.weight):
             history = []
         elif config.solver == "lm":
-            history = levenberg_marquardt(problem, config.lm_iterations)
-            uncertainty = turn_uncertainty_deg(problem, aligned)
+            steps = config.lm_iterations if sum(aligned) >= PIVOT_MIN_VIEWS else min(config.lm_iterations,
+                                                                                   config.two_view_lm_iterations)
+            history = levenberg_marquardt(problem, steps, config.lm_tolerance)
+            curvature = turn_uncertainty_deg(problem, aligned) if uncertainty else None
         else:
             history = minimize(problem, config.iterations, config.learning_rate, config.polish_iterations,
                                config.polish_rounds)
     result = alignment_result(problem, depths, grids, data, root, tree, aligned, history)
-    return replace(result, turn_uncertainty_deg=uncertainty)
+    return replace(result, turn_uncertainty_deg=curvature)
 
 
 def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: Sequence[PairCorrespondences],
@@ -254,8 +283,15 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
                                focal_prior=config.focal_prior, shared_relief=config.shared_relief,
-                               min_turns=min_turns, turn_bound_weight=config.turn_bound_weight)
+                               min_turns=min_turns, turn_bound_weight=config.turn_bound_weight,
+                               optimize_relief=config.optimize_relief,
+                               pivot=_pivot(initial, root) if config.pivot_poses and sum(aligned) >= PIVOT_MIN_VIEWS else None)
     return problem, data
+
+
+def _pivot(initial: InitialState, root: int) -> np.ndarray:
+    """A point of the finger: on the root camera's optical axis at its median depth (1 in normalised units)."""
+    return np.asarray(initial.translations[root], np.float64) + np.asarray(initial.rotations[root], np.float64)[:, 2]
 
 
 def field_grids(depths: Sequence[np.ndarray], config: GlobalAlignConfig) -> list[FieldGrid]:

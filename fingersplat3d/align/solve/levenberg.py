@@ -30,6 +30,13 @@ def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     """IRLS-weighted residual vector and its Jacobian over ``problem.unknowns()``'s flat layout."""
     local = problem.row_unknowns()  # name -> [M, k] tensors, the values each row reads
     rows, derivatives = row_residuals_and_derivatives(problem, local)  # [M, 4] whitened, [M, 4, 20]
+    chain = problem.pivot_chain()
+    if chain is not None:  # each end's derivative by its camera centre, carried onto its rotation and pivot unknowns
+        by_omega, by_pivot = chain
+        for start, view in ((0, problem.view_a), (10, problem.view_b)):
+            by_centre = derivatives[:, :, start + 3:start + 6].clone()
+            derivatives[:, :, start:start + 3] += by_centre @ by_omega[view]
+            derivatives[:, :, start + 3:start + 6] = by_centre @ by_pivot[view]
     columns = problem.row_columns()  # name -> ([M, k, C] column indices, -1 where fixed; [M, k, C] weights)
     e = torch.stack([(rows[:, :2] ** 2).sum(1), (rows[:, 2:] ** 2).sum(1)], 1)  # [M, 2]
     irls = torch.sqrt(problem.weight[:, None] / (problem.robust_px ** 2 + e))  # [M, 2]
@@ -37,22 +44,27 @@ def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     residual = (rows * scale).reshape(-1).numpy()
     derivatives = (derivatives * scale[:, :, None]).numpy()
     count = rows.shape[0]
-    data_rows, data_cols, data_vals = [], [], []
-    row_index = np.arange(4 * count).reshape(count, 4)
+    # Every local unknown's columns side by side ([M, K]), with the slot of the derivative each one takes, so that
+    # the sparse entries are gathered in one pass (one mask over all of them, not one per local unknown).
+    cols, weights, slots = [], [], []
     slot = 0
     for name, width in ROW_UNKNOWNS:
         for k in range(width):
             c, w = columns[name][0][:, k, :], columns[name][1][:, k, :]  # [M, C]
-            vals = derivatives[:, :, slot, None] * w[:, None, :]  # [M, 4, C]
-            mask = np.broadcast_to((c >= 0)[:, None, :], vals.shape)
-            data_rows.append(np.broadcast_to(row_index[:, :, None], vals.shape)[mask])
-            data_cols.append(np.broadcast_to(c[:, None, :], vals.shape)[mask])
-            data_vals.append(vals[mask])
+            cols.append(c)
+            weights.append(w)
+            slots += [slot] * c.shape[1]
             slot += 1
+    cols, weights = np.concatenate(cols, 1), np.concatenate(weights, 1)  # [M, K]
+    vals = derivatives[:, :, slots] * weights[:, None, :]  # [M, 4, K]
+    keep = np.broadcast_to((cols >= 0)[:, None, :], vals.shape)
+    # Straight into CSR: the entries are in row order already (a repeated column within a row is summed by every
+    # product, as a Jacobian's entries must be).
+    indptr = np.concatenate([[0], np.cumsum(keep.sum(2).reshape(-1))])
     prior_residual, prior_jacobian = problem.prior_system()
     size = problem.unknowns().numel()
-    jacobian = sparse.coo_matrix((np.concatenate(data_vals), (np.concatenate(data_rows), np.concatenate(data_cols))),
-                                 shape=(4 * count, size)).tocsr()
+    jacobian = sparse.csr_matrix((vals[keep], np.broadcast_to(cols[:, None, :], vals.shape)[keep], indptr),
+                                 shape=(4 * count, size))
     return np.concatenate([residual, prior_residual]), sparse.vstack([jacobian, prior_jacobian]).tocsr()
 
 

@@ -203,7 +203,9 @@ def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config
     rotations = np.stack([rig.rotations[v] @ quarter_turn(turns[v]).T for v in range(n_views)])
     initial = InitialState(rotations, rig.centers.copy(), log_scales, alphas, np.full(n_views, np.log(rig.focal)), fields)
     guesses = np.broadcast_to(np.asarray(capture.focal_guesses, np.float64), (n_views,)).copy()
-    problem, data = alignment_problem(depths, guesses, capture.correspondences, config, grids, initial, aligned, root)
+    # The rig holds the poses (camera centres, chained onto its own unknowns): no pivot.
+    problem, data = alignment_problem(depths, guesses, capture.correspondences, replace(config, pivot_poses=False), grids,
+                                      initial, aligned, root)
     return problem, data, grids, tree, aligned
 
 
