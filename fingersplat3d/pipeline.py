@@ -352,8 +352,9 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
     status["turn_at_least_deg"] = least
     if short:
         _warn(report, "the turn between " + ", ".join(short) + " is smaller than the views' silhouette widths allow "
-              "(turning about a finger cannot narrow it faster than cos(turn)): the finger's section is probably "
-              "flatter than the round prior, and the turn too small")
+              "if the widest view faces the finger's widest extent (turning about a finger cannot narrow it faster "
+              "than cos(turn)): either the turn is too small, or that view is oblique to a flat finger (then the bound "
+              "does not hold)")
 
 
 def _refine_with_icp(capture: Capture, cameras: list[Camera], clouds: list, aligned: list[int], root: int,

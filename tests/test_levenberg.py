@@ -46,7 +46,7 @@ def test_the_built_jacobian_gives_the_loss_gradient(capture, shared, bounded, pi
     """2 J^T r (the IRLS system) equals autograd's gradient of the true loss, every unknown included (and the
     hinge rows of least turns, two of three pairs held below their bound), with the translation unknowns the pivot
     in each camera's frame (the chain onto the rotations included) or the camera centres (as a rig holds them)."""
-    config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared, pivot_poses=pivot)
+    config = GlobalAlignConfig(shared_relief=shared, shared_focal=shared, pivot_poses=pivot, turn_bound_weight=1e3)
     min_turns = np.array([[np.nan, 1.2, 0.1], [1.2, np.nan, 1.5], [0.1, 1.5, np.nan]]) if bounded else None
     problem, *_ = _problem(capture, config, noise_px=2.0, min_turns=min_turns)  # residuals on both sides of the Cauchy scale
     assert problem.pivoted == pivot
@@ -116,10 +116,11 @@ def test_fuse_reports_the_turn_uncertainty_of_every_pair(capture):
 
 
 def test_the_solved_turns_keep_to_their_bounds(capture):
-    """A least turn above the one the matches want holds the pair at it (to a hair); a bound below it does not bind."""
+    """A least turn above the one the matches want holds the pair at it (to a hair); a bound below it does not bind
+    (the hinge rows' weight as it was when they were on by default)."""
     from fingersplat3d.eval.poses import rotation_angle_deg
 
-    config = GlobalAlignConfig()
+    config = GlobalAlignConfig(turn_bound_weight=1e3)
     bounds = np.full((3, 3), np.nan)
     bounds[0, 1] = bounds[1, 0] = np.radians(52.0)  # the true turn is 45
     bounds[1, 2] = bounds[2, 1] = np.radians(30.0)

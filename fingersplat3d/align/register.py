@@ -249,7 +249,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                               rig_align(d, f, c, cfg, rig, sizes, previous))
     alignment = align(depths, focals, registered, config.global_align)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
-    # From here on no pair may turn less than its silhouettes allow (a round prior on a flat finger would).
+    # Each pair's least turn from the silhouettes: held by hinge rows only where GlobalAlignConfig.turn_bound_weight > 0.
     min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals))
     placed = np.asarray(alignment.aligned, bool)
     min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan

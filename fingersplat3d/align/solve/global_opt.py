@@ -77,7 +77,7 @@ class GlobalAlignConfig:
     """Each camera's translation unknown is where a point of the finger (on the root view's axis at its median depth)
     lies in the camera's frame, so that turning about the finger is a straight line in the unknowns
     (:class:`~fingersplat3d.align.solve.alignment_problem.AlignmentProblem`). Measured on another group's crops at
-    rolls 45 degrees apart (docs/measurements.md): the wide triplets' worst pairs 5.7-9.8 -> ... degrees."""
+    rolls 45 degrees apart (docs/measurements.md): the wide triplets' worst pairs 5.7-9.8 -> 0.3-2.7 degrees."""
     field_knots: float = 8.0
     """Knot intervals of each view's depth field across the finger's short side (0 = no field)."""
     field_smoothness: float = 0.05
@@ -104,9 +104,12 @@ class GlobalAlignConfig:
     where along it the turn lies, and the pair's own similarity the fit starts from is nearer the truth than where
     the priors stop a longer fit (synthetic ring, two views: 0.89 degrees at 15 steps; real, frames 0 and 1 alone
     carried into frame 2: texture correlation 0.12 at 15, 0.07 at 40)."""
-    turn_bound_weight: float = 1e3
+    turn_bound_weight: float = 0.0
     """Weight of the hinge rows that keep each view pair turned at least as far as their silhouette widths allow
-    (``min_turns`` of :func:`global_align`; :mod:`~fingersplat3d.align.width_check`)."""
+    (``min_turns`` of :func:`global_align`; :mod:`~fingersplat3d.align.width_check`). Off (1e3 before): the bounds had
+    held the unfinished fit's turns up on flat fingers; with the rounds run to their end they only bind where they
+    are wrong, when the capture's widest view is oblique to a flat section (another group's crops -45 / -18 / 14:
+    bound 34 degrees, true 27; with the hinges 6.7 degrees off, without 0.1). Real and synthetic tables unchanged."""
     shared_relief: bool = True
     """One relief scale for all views (they see one finger) instead of one per view. Measured (README,
     5 seeds): rotation error median on synthetic ``cfpose`` 3.93 -> 3.35 deg, ``uwa`` 1.99 -> 2.01 deg;
