@@ -31,10 +31,34 @@ def test_reasons_gsplat_cannot_render():
         assert "gradient to K" in gsplat_backend.why_not_usable(means.cuda(), K.cuda().requires_grad_())
 
 
-def test_zero_quaternions_become_the_identity():
+def test_gsplat_is_handed_the_references_quaternions_and_shifted_pixel_centres(monkeypatch):
+    """What rasterize_gsplat passes to gsplat's projection (a stand-in module records it, so no GPU is needed):
+    (near-)zero quaternions as the identity, the rest unit, and K's principal point half a pixel on."""
+    import sys
+    import types
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def projection(means, covars, quats, scales, viewmats, Ks, *args, **kwargs):
+        seen.update(quats=quats, K=Ks[0])
+        raise Stop
+
+    fake = types.ModuleType("gsplat.cuda._wrapper")
+    fake.fully_fused_projection = projection
+    fake.isect_offset_encode = fake.isect_tiles = fake.rasterize_to_pixels = None
+    monkeypatch.setitem(sys.modules, "gsplat", types.ModuleType("gsplat"))
+    monkeypatch.setitem(sys.modules, "gsplat.cuda", types.ModuleType("gsplat.cuda"))
+    monkeypatch.setitem(sys.modules, "gsplat.cuda._wrapper", fake)
     quats = torch.tensor([[0.0, 0.0, 0.0, 0.0], [0.0, 2.0, 0.0, 0.0]])
-    unit = gsplat_backend._unit_quats(quats)
-    assert unit.tolist() == [[1.0, 0.0, 0.0, 0.0], [0.0, 2.0, 0.0, 0.0]]
+    K = torch.tensor([[100.0, 0, 31.5], [0, 100.0, 23.5], [0, 0, 1]])
+    with pytest.raises(Stop):
+        gsplat_backend.rasterize_gsplat(torch.zeros(2, 3), quats, torch.ones(2, 3), torch.ones(2), torch.ones(2, 1),
+                                        torch.eye(4), K, 64, 48, 0.01, 0.3)
+    assert seen["quats"].tolist() == [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]]
+    assert seen["K"][0, 2] == 32.0 and seen["K"][1, 2] == 24.0 and K[0, 2] == 31.5  # the caller's K is left alone
 
 
 def _cuda_scene(seed, channels=3, n=80, width=64, height=48):

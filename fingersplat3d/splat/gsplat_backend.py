@@ -15,7 +15,7 @@ Differences from the reference (:mod:`.reference`), all gsplat's design:
   falls below 1e-4 (the ``numba`` backend's default too);
 - no gradient reaches ``K`` (the fit never asks for one); float32 only.
 
-:func:`usable` says when ``auto`` may pick it; ``rasterize(..., backend="gsplat")`` outside those
+:func:`why_not_usable` says when ``auto`` may pick it; ``rasterize(..., backend="gsplat")`` outside those
 conditions is a ValueError.
 """
 from __future__ import annotations
@@ -27,7 +27,9 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-__all__ = ["GsplatRender", "installed", "usable", "why_not_usable", "rasterize_gsplat"]
+from ..rotations import normalize_quaternions
+
+__all__ = ["GsplatRender", "installed", "why_not_usable", "rasterize_gsplat"]
 
 
 class GsplatRender(NamedTuple):
@@ -56,19 +58,6 @@ def why_not_usable(means: Tensor, K: Tensor) -> str | None:
     return None
 
 
-def usable(means: Tensor, K: Tensor) -> bool:
-    """Whether ``auto`` picks gsplat for these inputs."""
-    return why_not_usable(means, K) is None
-
-
-def _unit_quats(quats: Tensor) -> Tensor:
-    """Zero quaternions as the identity (the reference's convention); gsplat normalises the rest."""
-    zero = quats.abs().sum(-1, keepdim=True) == 0
-    identity = torch.zeros_like(quats)
-    identity[:, 0] = 1.0
-    return torch.where(zero, identity, quats)
-
-
 def rasterize_gsplat(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
                      world_to_cam: Tensor, K: Tensor, width: int, height: int, near: float, low_pass: float,
                      tile_size: int = 16) -> GsplatRender:
@@ -79,7 +68,7 @@ def rasterize_gsplat(means: Tensor, quats: Tensor, scales: Tensor, opacities: Te
     shifted_K = K.detach().clone()
     shifted_K[:2, 2] += 0.5
     radii, means2d_batch, depths, conics, _ = fully_fused_projection(
-        means, None, _unit_quats(quats), scales, world_to_cam[None], shifted_K[None], width, height,
+        means, None, normalize_quaternions(quats), scales, world_to_cam[None], shifted_K[None], width, height,
         eps2d=low_pass, near_plane=near, packed=False)  # [1, N, ...]
     means2d = means2d_batch[0] - 0.5  # in the project's pixels; the compositor reads it, so a retained grad arrives
     gsplat_means2d = (means2d + 0.5)[None]

@@ -75,7 +75,7 @@ class AlignmentProblem(torch.nn.Module):
                  initial: InitialState, free: Sequence[bool], *, shared_focal: bool, optimize_focal: bool,
                  focal_guess: np.ndarray, robust_px: float, alpha_prior: float, field_smoothness: float,
                  field_prior: float, focal_prior: float, shared_relief: bool = False,
-                 min_turns: np.ndarray | None = None, turn_bound_weight: float = 0.0, optimize_relief: bool = True,
+                 min_turns: np.ndarray | None = None, turn_bound_weight: float = 0.0,
                  pivot: np.ndarray | None = None) -> None:
         super().__init__()
         dtype = torch.float64
@@ -131,8 +131,7 @@ class AlignmentProblem(torch.nn.Module):
         self.translation = torch.nn.Parameter(torch.as_tensor(translations, dtype=dtype).clone())
         self.log_scale = torch.nn.Parameter(torch.as_tensor(initial.log_scales, dtype=dtype).clone())
         alphas = np.asarray(initial.log_alphas, np.float64)
-        self.log_alpha = torch.nn.Parameter(torch.as_tensor([alphas.mean()] if shared_relief else alphas, dtype=dtype).clone(),
-                                            requires_grad=optimize_relief)
+        self.log_alpha = torch.nn.Parameter(torch.as_tensor([alphas.mean()] if shared_relief else alphas, dtype=dtype).clone())
         focal = np.asarray(initial.log_focals, np.float64)
         self.log_focal = torch.nn.Parameter(torch.as_tensor([focal.mean()] if shared_focal else focal, dtype=dtype).clone(),
                                             requires_grad=optimize_focal)
@@ -259,8 +258,7 @@ class AlignmentProblem(torch.nn.Module):
             columns[f"omega_{end}"] = per_view(at["omega"], 3)
             columns[f"t_{end}"] = per_view(at["translation"], 3)  # the centre's; see pivot_chain when pivoted
             columns[f"ls_{end}"] = per_view(at["log_scale"], 1)
-            alpha_cols = (at["log_alpha"] + (0 * view if shared_alpha else view))[:, None, None] * ones
-            columns[f"la_{end}"] = (alpha_cols if self.log_alpha.requires_grad else -ones).astype(np.int64), ones
+            columns[f"la_{end}"] = ((at["log_alpha"] + (0 * view if shared_alpha else view))[:, None, None] * ones).astype(np.int64), ones
             focal_cols = (at["log_focal"] + (0 * view if shared_focal else view))[:, None, None] * ones
             columns[f"lf_{end}"] = (focal_cols if self.log_focal.requires_grad else -ones).astype(np.int64), ones
             if self.field.numel():
@@ -316,11 +314,9 @@ class AlignmentProblem(torch.nn.Module):
                 [(at["field"] + bend[:, 0], root), (at["field"] + bend[:, 1], -2 * root), (at["field"] + bend[:, 2], root)])
         if field.size:
             add(np.sqrt(self.field_prior) * field, [(at["field"] + np.arange(field.size), np.sqrt(self.field_prior))])
-        if self.log_alpha.requires_grad:
-            alphas = self.log_alpha.detach().numpy()
-            repeat = self.medians.shape[0] if alphas.size == 1 else 1  # a shared relief is counted once per view
-            add(np.sqrt(self.alpha_prior * repeat) * alphas,
-                [(at["log_alpha"] + np.arange(alphas.size), np.sqrt(self.alpha_prior * repeat))])
+        alphas = self.log_alpha.detach().numpy()
+        repeat = self.medians.shape[0] if alphas.size == 1 else 1  # a shared relief is counted once per view
+        add(np.sqrt(self.alpha_prior * repeat) * alphas, [(at["log_alpha"] + np.arange(alphas.size), np.sqrt(self.alpha_prior * repeat))])
         if self.log_focal.requires_grad:
             guess = (self.log_focal_guess.mean() if self.shared_focal else self.log_focal_guess).numpy()
             focal = self.log_focal.detach().numpy()

@@ -71,8 +71,6 @@ class GlobalAlignConfig:
     """One focal length for all views (same camera), else one per view."""
     optimize_focal: bool = True
     """Let the focal move away from the guess (needs >= 2 views with parallax)."""
-    optimize_relief: bool = True
-    """Let the relief scale move (held only by the probes of :mod:`~fingersplat3d.align.solve.sensitivity`)."""
     pivot_poses: bool = True
     """Each camera's translation unknown is where a point of the finger (on the root view's axis at its median depth)
     lies in the camera's frame, so that turning about the finger is a straight line in the unknowns
@@ -145,8 +143,8 @@ class GlobalAlignment:
     """``[N, N]``: each view pair's rotation uncertainty from the fit's curvature (degrees; NaN for a view
     not aligned), where the solver gives one (Levenberg-Marquardt); None otherwise."""
     turn_sensitivity_deg: np.ndarray | None = None
-    """``[N, N]``: how far each view pair's turn moves when the focal or the relief is held off its solved value
-    (degrees; :mod:`~fingersplat3d.align.solve.sensitivity`), where the registration probed it; None otherwise."""
+    """``[N, N]``: how far each view pair's turn moves when the focal is held 10 % off its solved value (degrees;
+    :mod:`~fingersplat3d.align.solve.sensitivity`), where the registration probed it; None otherwise."""
 
     @property
     def world_to_cam(self) -> list[np.ndarray]:
@@ -287,7 +285,6 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
                                field_smoothness=config.field_smoothness, field_prior=config.field_prior,
                                focal_prior=config.focal_prior, shared_relief=config.shared_relief,
                                min_turns=min_turns, turn_bound_weight=config.turn_bound_weight,
-                               optimize_relief=config.optimize_relief,
                                pivot=_pivot(initial, root) if config.pivot_poses and sum(aligned) >= PIVOT_MIN_VIEWS else None)
     return problem, data
 
