@@ -165,6 +165,9 @@ def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], 
     alignment = report.get("alignment", {})
     if alignment.get("focals_px") is not None:
         alignment["focals_px"] = [float(f) * g for f, g in zip(alignment["focals_px"], grow)]
+    registration = report.get("registration", {})
+    if registration.get("pointmaps_redrawn_at_px") is not None:  # one focal for all views: the first view's growth
+        registration["pointmaps_redrawn_at_px"] = float(registration["pointmaps_redrawn_at_px"]) * grow[0]
     return cameras, out
 
 
@@ -206,21 +209,31 @@ def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfi
     return pointmaps, pair_pointmaps
 
 
+def _redraw(capture: Capture, config: FuseConfig):
+    """The views' pointmaps drawn through a given focal, where the backend draws them through a guessed one (the
+    prior without ``--focal-px``), for :func:`~fingersplat3d.align.register.register_views`; else None."""
+    backend = _backend(config)
+    if config.focal_px is not None or not hasattr(backend, "focal_px"):
+        return None
+    return lambda focal: replace(backend, focal_px=float(focal)).predict_views(capture.views)
+
+
 def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_pointmaps, config: FuseConfig,
-              report: dict, say, rig: Rig | None = None, period_px: float | None = None) -> GlobalAlignment:
+              report: dict, say, rig: Rig | None = None, period_px: float | None = None) -> tuple[GlobalAlignment, list]:
     """Pair relations of the distinct ``pairs`` and the global alignment: image correspondences, or the
-    backend's pairwise pointmaps."""
+    backend's pairwise pointmaps. Also the pointmaps the alignment stands on (redrawn at its focal, or as given)."""
     identical = [{"a": capture.views[a].name, "b": capture.views[b].name, "ok": False,
                   "reason": "identical images: no parallax (monocular mode)"}
                  for a in range(len(capture)) for b in range(a + 1, len(capture)) if (a, b) not in pairs]
     if pair_pointmaps is None:
         registration = register_views(capture.views, pointmaps, config.registration, pairs, progress=say, rig=rig,
-                                      period_px=period_px)
+                                      period_px=period_px, redraw=_redraw(capture, config))
         report["pairs"] = registration.pairs + identical
         report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds,
                                   "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)},
-                                  "photometric": registration.photometric}
-        return registration.alignment
+                                  "photometric": registration.photometric,
+                                  "pointmaps_redrawn_at_px": registration.redrawn_at_px}
+        return registration.alignment, registration.pointmaps
     if rig is not None:
         raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "
                          "do not take one")
@@ -239,7 +252,7 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
             registered.append(result.correspondences)
     report["pairs"] = records + identical
     return global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registered,
-                        config.registration.global_align)
+                        config.registration.global_align), pointmaps
 
 
 def refuse_focal_with_rig(focal_px: float | None, rig: Rig | None) -> None:
@@ -277,7 +290,8 @@ def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Ri
     pairs = _distinct_pairs(capture)
     pointmaps, _ = _pointmaps(capture, pairs, config, {})
     registration = register_views(capture.views, pointmaps, config.registration, pairs, rig=rig,
-                                  period_px=scale.working_period_px())
+                                  period_px=scale.working_period_px(), redraw=_redraw(capture, config))
+    pointmaps = registration.pointmaps
     seed = capture.metadata.get("seed")
     name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
@@ -460,7 +474,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
             pointmaps, pair_pointmaps = _pointmaps(capture, pairs, config, report)
         bar.update()
         with step("registration"):
-            alignment = _register(capture, pairs, pointmaps, pair_pointmaps, config, report,
+            alignment, pointmaps = _register(capture, pairs, pointmaps, pair_pointmaps, config, report,
                                   lambda text: bar.set_postfix_str(f"registration: {text}"), rig,
                                   scale.working_period_px())
         bar.update()

@@ -37,6 +37,10 @@ def test_fuse_recovers_cameras_and_depth(uwa, reconstruction):
     tips = report["registration"]["tip"]  # synthetic fingers point left, cut by the right border
     assert all(tip["side"] == "left" and "border cuts the other" in tip["why"] for tip in tips.values())
     assert report["registration"]["photometric"] == {}  # the dense photometric refinement is opt-in (--photometric)
+    # The synthetic camera's focal is 3.33x the long side, the prior guesses 3x: the pointmaps are drawn again through
+    # the fitted focal (photo pixels: this capture is fused at its own resolution or near it).
+    redrawn = report["registration"]["pointmaps_redrawn_at_px"]
+    assert redrawn == pytest.approx(report["alignment"]["focals_px"][0], rel=0.05)
     errors = relative_rotation_errors([c.world_to_cam for c in reconstruction.cameras],
                                       [v.camera.world_to_cam for v in uwa.views])
     # The 45-degree pairs: measured 3-7 degrees (see the README's table); a broken alignment is tens.
