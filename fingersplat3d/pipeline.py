@@ -212,9 +212,9 @@ def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfi
 def _redraw(capture: Capture, config: FuseConfig):
     """The views' pointmaps drawn through a given focal, where the backend draws them through a guessed one (the
     prior without ``--focal-px``), for :func:`~fingersplat3d.align.register.register_views`; else None."""
-    backend = _backend(config)
-    if config.focal_px is not None or not hasattr(backend, "focal_px"):
+    if config.focal_px is not None or config.backend != "prior":  # a learned backend's pointmaps come with its focal
         return None
+    backend = _backend(config)
     return lambda focal: replace(backend, focal_px=float(focal)).predict_views(capture.views)
 
 

@@ -70,3 +70,20 @@ def test_pointmaps_are_redrawn_through_a_fitted_focal_far_from_the_guess():
     assert register_views(views, result.pointmaps, redraw=redraw).redrawn_at_px is None
     pair = register_views(views[:2], get_backend("prior").predict_views(views[:2]), redraw=redraw)
     assert pair.redrawn_at_px is None and len(redrawn_with) == 1
+
+
+@pytest.mark.parametrize("focal, aligned", [(float("nan"), 3), (float("inf"), 3), (-5.0, 3), (0.0, 3), (900.0, 2)])
+def test_no_redraw_through_a_lost_focal_or_with_two_views(focal, aligned):
+    """A fit whose focal is not a finite positive number, or that placed two views only, keeps its pointmaps: the
+    redraw is never asked for (a NaN focal handed to the prior would be refused as bad input)."""
+    from fingersplat3d.align.register import _redrawn
+    from fingersplat3d.align.solve.global_opt import GlobalAlignment
+
+    depths = [np.full((8, 8), 3000.0, np.float32)] * 3
+    alignment = GlobalAlignment([np.eye(4)] * 3, [focal] * 3, depths, [1.0] * 3, [1.0] * 3, 0.1, 0.01, [(0, 1), (0, 2)],
+                                [True] * aligned + [False] * (3 - aligned), 0)
+
+    def redraw(_):
+        raise AssertionError("redrawn")
+
+    assert _redrawn(alignment, depths, [3000.0] * 3, ([], None), redraw, RegistrationConfig()) is None

@@ -318,13 +318,14 @@ def _redrawn(alignment: GlobalAlignment, depths: list[np.ndarray], focals: list[
              redraw: Callable[[float], Sequence[Pointmap]], config: RegistrationConfig):
     """The alignment solved again on pointmaps drawn through its own focal: ``(alignment, pointmaps, focal)``, or None
     when the views share no fitted focal, fewer than :data:`PIVOT_MIN_VIEWS` are aligned (two views cannot fix the
-    focal: their fitted one is no better than the guess) or the focal is within ``redraw_tolerance`` of the guess."""
+    focal: their fitted one is no better than the guess), the focal is within ``redraw_tolerance`` of the guess or
+    not a finite positive number."""
     align_config = config.global_align
     if not (align_config.shared_focal and align_config.optimize_focal) or sum(alignment.aligned) < PIVOT_MIN_VIEWS:
         return None
     focal, guess = float(alignment.focals[0]), float(np.exp(np.mean(np.log(focals))))
-    if abs(np.log(focal / guess)) <= np.log1p(config.redraw_tolerance):
-        return None
+    if not (np.isfinite(focal) and focal > 0) or abs(np.log(focal / guess)) <= np.log1p(config.redraw_tolerance):
+        return None  # a fit that lost its focal keeps the pointmaps it had (the caller reports the fit)
     pointmaps = list(redraw(focal))
     # The start: the solved poses; each view's scale and relief such that its median depth and relief stay where they
     # were (the new pointmaps stand at about the new focal instead of the guess, with the same relief in pixels),
