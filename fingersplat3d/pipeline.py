@@ -37,6 +37,8 @@ MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's mono
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
 MAX_TURN_SENSITIVITY_DEG = 1.5  # a pair turn that moves more than this under the focal probe is warned about
+EXIF_FOCAL_AGREEMENT = 0.02
+"""The views' EXIF focal lengths (photo pixels) must agree within this share to be used: one camera at one zoom."""
 MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
 
 
@@ -74,6 +76,10 @@ class FuseConfig:
     are made with it and the alignment keeps it instead of fitting one. Two views cannot fix the focal themselves
     (their optical axes meet at the finger), and their turn follows it: on the real dev captures two views alone
     turned 14-16 degrees off with the focal fitted, 1-5 with it given (docs/measurements.md, real captures)."""
+    exif_focal: bool = True
+    """Take the focal the photos' EXIF records (:mod:`~fingersplat3d.io.exif`: phones and cameras write it) as
+    known, like ``focal_px``, when every view has one and they agree within :data:`EXIF_FOCAL_AGREEMENT` (one camera,
+    one zoom), the ``prior`` backend is used, and neither ``focal_px`` nor a rig gives the focal."""
     px_per_mm: float | None = None
     """Metric hint: image pixels per millimetre at the finger (first view)."""
     finger_width_mm: float | None = None
@@ -207,6 +213,32 @@ def _pointmaps(capture: Capture, pairs: list[tuple[int, int]], config: FuseConfi
     if getattr(backend, "stats", None):
         report["pointmap_inference"] = [asdict(record) for record in backend.stats]
     return pointmaps, pair_pointmaps
+
+
+def _with_exif_focal(capture: Capture, config: FuseConfig, rig: Rig | None, report: dict) -> FuseConfig:
+    """``config`` with the focal the views' EXIF records (:attr:`FuseConfig.exif_focal`), said in ``report["exif_focal"]``
+    (``used``, ``focal_px``, per view where it came from or why not), when the capture's loader read one."""
+    found = capture.metadata.get("exif_focal")
+    if not found:  # a capture not read from photo files (a capture folder, an array)
+        return config
+    views = {name: found.get(name, {}).get("how", "not read") for name in capture.names}
+    values = [found.get(name, {}).get("focal_px") for name in capture.names]
+    record = {"used": False, "focal_px": None, "views": views}
+    report["exif_focal"] = record
+    reasons = ((not config.exif_focal, "--no-exif-focal"), (config.focal_px is not None, "--focal-px gives the focal"),
+               (rig is not None, "the rig gives the focal"),
+               (config.backend != "prior", "a learned backend brings its own focal"),
+               (any(v is None for v in values), "not every view's EXIF records one"))
+    why_not = next((reason for applies, reason in reasons if applies), None)
+    if why_not:
+        record["why_not"] = why_not
+        return config
+    if max(values) > (1.0 + EXIF_FOCAL_AGREEMENT) * min(values):
+        record["why_not"] = f"the views' EXIF focal lengths differ ({min(values):.0f}-{max(values):.0f} px: another zoom)"
+        return config
+    focal = float(np.median(values))
+    record.update(used=True, focal_px=focal)
+    return replace(config, focal_px=focal)
 
 
 def _redraw(capture: Capture, config: FuseConfig):
@@ -457,6 +489,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}
+    config = _with_exif_focal(capture, config, rig, report)
     bar = tqdm(total=5 + (config.splat is not None), desc="fs3d fuse", unit="stage", disable=not progress)
 
     def step(name):

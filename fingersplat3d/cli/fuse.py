@@ -57,6 +57,9 @@ def add(commands) -> None:
     fuse.add_argument("--focal-px", type=POSITIVE,
                       help="the cameras' focal length in the photos' pixels, when known: kept instead of fitted (two "
                            "views cannot fix it, and their turn follows it; see docs/measurements.md)")
+    fuse.add_argument("--no-exif-focal", dest="exif_focal", action="store_false",
+                      help="fit the focal even when the photos' EXIF records one (by default a focal every photo's EXIF "
+                           "agrees on is kept, as --focal-px; report.json exif_focal says what was found)")
     fuse.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': keep its camera poses and focal fixed "
                                                "(the views are its cameras in order)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -82,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                                                                      solver=args.alignment_solver))
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
-                        focal_px=args.focal_px, px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
+                        focal_px=args.focal_px, exif_focal=args.exif_focal, px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
                         splat=splat_config(args), ridge_px=ridge_px(args))
     rig = read_rig(args.rig)
     start = time.perf_counter()

@@ -18,8 +18,10 @@ def add(commands) -> None:
 
 
 def describe(capture) -> dict:
+    exif = capture.metadata.get("exif_focal", {})
     views = [{"name": v.name, "size": f"{v.width}x{v.height}", "channels": v.channels,
-              "mask": v.mask is not None, "camera": v.camera is not None, "depth": v.depth is not None}
+              "mask": v.mask is not None, "camera": v.camera is not None, "depth": v.depth is not None,
+              "exif_focal_px": exif.get(v.name, {}).get("focal_px")}
              for v in capture.views]
     keys = ("dataset", "rig", "seed", "pattern_class", "ridge_period_mm", "units", "subject", "finger", "capture")
     return {"views": views, **{k: capture.metadata[k] for k in keys if k in capture.metadata}}
@@ -51,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
             print(", ".join(f"{k}: {v}" for k, v in head.items()))
             for view in report["views"]:
                 flags = [k for k in ("mask", "camera", "depth") if view[k]]
+                focal = "" if view["exif_focal_px"] is None else f", EXIF focal {view['exif_focal_px']:.0f} px"
                 print(f"  {view['name']}: {view['size']}, {'gray' if view['channels'] == 1 else 'RGB'}"
-                      + (f", with {', '.join(flags)}" if flags else ""))
+                      + (f", with {', '.join(flags)}" if flags else "") + focal)
     return 0

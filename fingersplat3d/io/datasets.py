@@ -21,7 +21,7 @@ mistaken for views). Names are sorted naturally (``img2`` before ``img10``).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
+from .exif import exif_focal
 from .images import IMAGE_SUFFIXES, read_image, read_mask
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
@@ -236,7 +237,8 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
     Views are named by file stem; ``<stem>_mask.png`` files in the folder are masks, not views,
     and a mask is found as ``masks/<stem>.png`` or ``<stem>_mask.png`` next to its image. Views may
     differ in size; fewer than ``min_views`` images is an ``InputError``.
-    Metadata: ``dataset`` ``"images"`` and ``sources`` (view -> path).
+    Metadata: ``dataset`` ``"images"``, ``sources`` (view -> path) and ``exif_focal`` (view -> the focal its EXIF
+    records in its pixels, ``focal_px`` or None, and ``how``: :func:`~fingersplat3d.io.exif.exif_focal`).
     """
     explicit = not isinstance(folder_or_files, (str, Path)) or Path(folder_or_files).is_file()
     files, where = _image_files(folder_or_files, recursive=False)
@@ -263,7 +265,9 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
             if not mask.any():
                 raise input_error(mask_path, "mask is empty (no pixel set)")
         views.append(View(path.stem, image, mask=mask))
-    return Capture(tuple(views), {"dataset": "images", "sources": {path.stem: str(path) for path in files}})
+    focals = {path.stem: asdict(exif_focal(path, (image.shape[1], image.shape[0]))) for path, image in zip(files, images)}
+    return Capture(tuple(views), {"dataset": "images", "sources": {path.stem: str(path) for path in files},
+                                  "exif_focal": focals})
 
 
 # ------------------------------------------------------------------------------------------ dispatch
@@ -301,6 +305,7 @@ def _files_as_given(files: list[Path], gray: bool | None) -> Capture:
                     "sources": {name: str(path) for name, path in zip(names, files)}}
     else:
         return capture
+    metadata["exif_focal"] = {name: capture.metadata["exif_focal"][view.name] for view, name in zip(capture.views, names)}
     return Capture(tuple(replace(view, name=name) for view, name in zip(capture.views, names)), metadata)
 
 
