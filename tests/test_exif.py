@@ -57,6 +57,11 @@ def test_no_focal_where_the_exif_gives_none_or_the_photo_was_cropped(tmp_path, t
     assert found.focal_px is None and why in found.how
 
 
+def test_a_focal_no_camera_has_is_set_aside(tmp_path):
+    found = exif_focal(_photo(tmp_path / "a.jpg", **{"0xA405": 65000}), (400, 300))  # ~1900 times the long side
+    assert found.focal_px is None and "not a camera's focal" in found.how
+
+
 def test_a_file_pillow_cannot_read_has_no_focal(tmp_path):
     path = tmp_path / "a.jpg"
     path.write_bytes(b"not an image")
@@ -115,3 +120,16 @@ def test_fs3d_info_shows_each_photos_exif_focal(tmp_path, capsys):
     assert main(["info", str(with_focal), str(without)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert "EXIF focal 300 px" in lines[1] and "EXIF" not in lines[2]
+
+
+def test_fs3d_fuse_says_it_kept_the_exif_focal(tmp_path, capsys):
+    from fingersplat3d.cli import main
+    from fingersplat3d.synth import SynthConfig, synthesize
+
+    truth = synthesize(1, SynthConfig(size=(320, 256))).capture
+    focal = truth.views[0].camera.K[0, 0]
+    capture = _exif_capture(tmp_path, truth.views, [focal] * len(truth.views))
+    files = [str(tmp_path / f"{name}.jpg") for name in capture.names]
+    assert main(["fuse", *files, "-o", str(tmp_path / "out"), "--no-splat"]) == 0
+    assert "from the photos' EXIF, kept" in capsys.readouterr().out
+

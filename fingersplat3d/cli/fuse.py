@@ -96,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
         "identical images: monocular mode" if alignment["mode"] == "monocular" else f"alignment residual {alignment['residual_px']:.2f} px")
     print(f"wrote {args.output}: {len(result.capture)} views, {result.report['points']} points, units {result.units}, "
           f"{residual}, {time.perf_counter() - start:.1f} s")
+    exif = result.report.get("exif_focal", {})
+    if exif.get("used"):
+        print(f"  focal {exif['focal_px']:.0f} px from the photos' EXIF, kept (--no-exif-focal fits it)")
     if "splat" in result.report:
         splat = result.report["splat"]
         psnr = ", ".join(f"{name} {value:.1f}" for name, value in splat["psnr_in_mask_db"].items())

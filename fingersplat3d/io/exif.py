@@ -26,6 +26,9 @@ _PLANE_UNIT = 0xA210
 _PIXEL_X, _PIXEL_Y = 0xA002, 0xA003
 _UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}  # inch (the default), cm, and the mm / um some makers write
 FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
+PLAUSIBLE = (0.2, 50.0)
+"""A focal outside these multiples of the photo's long side is not a camera's (a fish-eye is ~0.3, a 2000 mm
+equivalent telephoto ~45): such an EXIF is set aside."""
 SHAPE_TOLERANCE = 0.01
 """A photo whose sides are not the full image's scaled by one factor (to this share) was cropped: no focal."""
 
@@ -48,6 +51,14 @@ def _number(value) -> float | None:
 
 def exif_focal(path: str | Path, size: tuple[int, int]) -> ExifFocal:
     """The focal of the photo at ``path`` in the pixels of the image as read (``size`` = (width, height), upright)."""
+    found = _exif_focal(path, size)
+    if found.focal_px is not None and not PLAUSIBLE[0] <= found.focal_px / max(size) <= PLAUSIBLE[1]:
+        return ExifFocal(None, f"{found.how} gives {found.focal_px:.0f} px, {found.focal_px / max(size):.2g} times the "
+                               "long side: not a camera's focal")
+    return found
+
+
+def _exif_focal(path: str | Path, size: tuple[int, int]) -> ExifFocal:
     try:
         from PIL import Image
 
