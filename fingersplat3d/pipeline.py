@@ -356,7 +356,8 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
                   + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
                   "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
                   + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
-                     "cameras' focal with --focal-px if it is known, or add a view" if focal_fitted else ""))
+                     "cameras' focal with --focal-px if it is known (photos whose EXIF records it give it themselves), or add a "
+                     "view" if focal_fitted else ""))
     if alignment.turn_sensitivity_deg is not None:
         status["turn_sensitivity_deg"] = _per_pair(names, alignment.turn_sensitivity_deg, 2)
         loose = {pair: value for pair, value in status["turn_sensitivity_deg"].items() if value > MAX_TURN_SENSITIVITY_DEG}
@@ -364,7 +365,7 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
             _warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
                   + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
                   f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "
-                  "the cameras' focal (--focal-px, --rig) or more views fix it")
+                  "the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     _check_turns_against_widths(capture, alignment, status, report)
     return status
 
