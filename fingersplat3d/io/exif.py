@@ -27,8 +27,8 @@ _PIXEL_X, _PIXEL_Y = 0xA002, 0xA003
 _UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}  # inch (the default), cm, and the mm / um some makers write
 FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
 PLAUSIBLE = (0.2, 50.0)
-"""A focal outside these multiples of the photo's long side is not a camera's (a fish-eye is ~0.3, a 2000 mm
-equivalent telephoto ~45): such an EXIF is set aside."""
+"""A focal outside these multiples of the photo's long side is not a camera's (a 4:3 photo's 10 mm-equivalent
+fish-eye is ~0.3, its 1600 mm-equivalent telephoto ~46): such an EXIF is set aside."""
 SHAPE_TOLERANCE = 0.01
 """A photo whose sides are not the full image's scaled by one factor (to this share) was cropped: no focal."""
 
