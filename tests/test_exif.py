@@ -11,17 +11,21 @@ from fingersplat3d.io.exif import FULL_FRAME_DIAGONAL_MM, exif_focal
 EXIF_IFD = 0x8769
 
 
-def _photo(path, size=(400, 300), orientation=None, **tags):
-    """A JPEG of ``size`` (as stored) with the given EXIF tags (by number) in its Exif IFD."""
+def _jpeg(path, pixels, orientation=None, **tags):
+    """``pixels`` (floats in [0, 1]) written as a JPEG with the given EXIF tags (by hex number) in its Exif IFD."""
     exif = Image.Exif()
     if orientation is not None:
         exif[0x0112] = orientation
     ifd = exif.get_ifd(EXIF_IFD)
     for key, value in tags.items():
         ifd[int(key, 16)] = value
-    image = Image.fromarray((np.random.default_rng(0).random((size[1], size[0], 3)) * 255).astype(np.uint8))
-    image.save(path, exif=exif)
+    Image.fromarray((np.clip(pixels, 0, 1) * 255).astype(np.uint8)).save(path, exif=exif, quality=95)
     return path
+
+
+def _photo(path, size=(400, 300), orientation=None, **tags):
+    """A noise JPEG of ``size`` (as stored) with the given EXIF tags."""
+    return _jpeg(path, np.random.default_rng(0).random((size[1], size[0], 3)), orientation, **tags)
 
 
 def test_the_35mm_equivalent_is_carried_to_the_photos_pixels(tmp_path):
@@ -74,13 +78,8 @@ def _exif_capture(folder, views, focals):
     paths = []
     for view, focal in zip(views, focals):
         height, width = view.image.shape[:2]
-        image = Image.fromarray((np.clip(view.image, 0, 1) * 255).astype(np.uint8))
-        exif = Image.Exif()
-        if focal is not None:
-            exif.get_ifd(EXIF_IFD)[0xA405] = round(focal / math.hypot(width, height) * FULL_FRAME_DIAGONAL_MM)
-        path = folder / f"{view.name}.jpg"
-        image.save(path, exif=exif, quality=95)
-        paths.append(path)
+        tags = {} if focal is None else {"0xA405": round(focal / math.hypot(width, height) * FULL_FRAME_DIAGONAL_MM)}
+        paths.append(_jpeg(folder / f"{view.name}.jpg", view.image, **tags))
     return load_any(paths)[0]
 
 

@@ -45,6 +45,7 @@ from .correspond.epipolar import fundamental_inliers
 from .correspond.guided import GuidedMatches, RidgeMaps, match_guided
 from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
+from .solve.alignment_problem import median_depth
 from .solve.global_opt import PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
@@ -330,15 +331,10 @@ def _redrawn(alignment: GlobalAlignment, depths: list[np.ndarray], focals: list[
     # The start: the solved poses; each view's scale and relief such that its median depth and relief stay where they
     # were (the new pointmaps stand at about the new focal instead of the guess, with the same relief in pixels),
     # the fields flat. One relief for all views when it is shared: their mean change.
-    ratio = np.array([_median_depth(pm.depth) / _median_depth(old) for pm, old in zip(pointmaps, depths)])
+    ratio = np.array([median_depth(pm.depth) / median_depth(old) for pm, old in zip(pointmaps, depths)])
     reliefs = np.asarray(alignment.relief_scale) * (ratio if not align_config.shared_relief else np.exp(np.mean(np.log(ratio))))
     start = replace(alignment, fields=[np.zeros_like(f) for f in alignment.fields], relief_scale=list(reliefs),
                     scales=list(np.asarray(alignment.scales) / ratio))
     solved = global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], solved_with[0], align_config,
                           previous=start, min_turns=solved_with[1])
     return solved, pointmaps, focal
-
-
-def _median_depth(depth: np.ndarray) -> float:
-    finite = depth[np.isfinite(depth)]
-    return float(np.median(finite)) if finite.size else 1.0

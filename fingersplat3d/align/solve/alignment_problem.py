@@ -38,7 +38,13 @@ import torch
 from ...rotations import axis_angle_to_matrix, left_jacobian, rotation_angle, skew
 from .depth_field import FieldGrid
 
-__all__ = ["Correspondences", "InitialState", "AlignmentProblem"]
+__all__ = ["Correspondences", "InitialState", "AlignmentProblem", "median_depth"]
+
+
+def median_depth(depth: np.ndarray) -> float:
+    """The median of a depth map's finite values (the problem's ``m_v``), 1 when it has none."""
+    finite = np.asarray(depth)[np.isfinite(depth)]
+    return float(np.median(finite)) if finite.size else 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +87,7 @@ class AlignmentProblem(torch.nn.Module):
         dtype = torch.float64
         n_views = len(depths)
         finite = [d[np.isfinite(d)] for d in depths]
-        medians = [float(np.median(f)) if f.size else 1.0 for f in finite]
+        medians = [median_depth(d) for d in depths]
         reliefs = [max(float(np.percentile(np.abs(f - m), 90)) if f.size else 0.0, 1e-6 * abs(m) + 1e-12)
                    for f, m in zip(finite, medians)]
         self.grids = list(grids)

@@ -32,7 +32,7 @@ from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
 
 from ...device import single_threaded
 from ...sampling import sample_bilinear
-from .alignment_problem import AlignmentProblem, Correspondences, InitialState
+from .alignment_problem import AlignmentProblem, Correspondences, InitialState, median_depth
 from .depth_field import FieldGrid
 from .levenberg import levenberg_marquardt, turn_uncertainty_deg
 from .optimize import minimize
@@ -244,8 +244,7 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
     else:
         root, tree = spanning_tree(n_views, pairs, root)
         aligned = reached(n_views, root, tree)
-    root_depth = depths[root][np.isfinite(depths[root])]
-    scene = float(np.median(root_depth)) if root_depth.size else 1.0
+    scene = median_depth(depths[root])
     grids = field_grids(depths, config)
     if previous is not None:
         initial = InitialState(np.stack([p[:3, :3] for p in previous.cam_to_world]), np.stack([p[:3, 3] for p in previous.cam_to_world]),

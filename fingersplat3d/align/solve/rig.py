@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 from ...device import single_threaded
 from ...rotations import axis_angle_to_matrix
 from ...scene import scaled_size
-from .alignment_problem import InitialState
+from .alignment_problem import InitialState, median_depth
 from .global_opt import (
     GlobalAlignConfig,
     GlobalAlignment,
@@ -179,7 +179,7 @@ class RigProblem(torch.nn.Module):
 
 
 def _median_depths(depths: Sequence[np.ndarray]) -> np.ndarray:
-    return np.array([float(np.nanmedian(d)) if np.isfinite(d).any() else 1.0 for d in depths])
+    return np.array([median_depth(d) for d in depths])
 
 
 def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config: GlobalAlignConfig,
