@@ -91,6 +91,22 @@ def test_thread_count_does_not_change_the_result(monkeypatch):
         assert torch.equal(a, b)  # no atomics, no per-thread partial sums: bitwise the same
 
 
+@pytest.mark.parametrize("channels", [1, 3])
+def test_kernels_compiled_for_a_feature_count_equal_the_general_ones(monkeypatch, channels):
+    from fingersplat3d.splat import cpu_composite
+
+    args, width, height = random_scene(7, n=300, channels=channels, dtype=torch.float32, width=70, height=50)
+    results = []
+    for kernels in (dict(cpu_composite._KERNELS), {0: cpu_composite._KERNELS[0]}):  # specialised, then general
+        monkeypatch.setattr(cpu_composite, "_KERNELS", kernels)
+        leaves = [t.clone().requires_grad_() for t in args]
+        out = rasterize(*leaves, width, height, backend="numba")
+        results.append((out.color, out.depth, torch.autograd.grad(weighted_loss(out), leaves[:5])))
+    assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
+    for a, b in zip(results[0][2], results[1][2]):
+        assert torch.allclose(a, b, rtol=1e-5, atol=1e-7)  # the same sums, fused multiply-adds placed apart
+
+
 def test_depth_order_is_a_stable_sort_with_ties_in_index_order():
     depths = np.array([3.0, 1.0, 2.0, 1.0, -1.0, 2.0, 1.0], np.float32)
     valid = np.array([True, True, True, True, False, True, True])

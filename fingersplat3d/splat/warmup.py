@@ -15,8 +15,7 @@ from typing import Callable
 
 __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
-KERNEL_NAMES = {"cpu_composite": ("prepare", "bin_tiles", "gather_pairs", "composite_forward", "composite_backward",
-                                  "reduce_pairs"),
+KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
                 "cpu_project": ("project_forward", "project_backward")}
 MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~30 s; cached on disk)"
 _warm = False
@@ -26,7 +25,8 @@ def _kernels() -> list:
     from . import cpu_composite, cpu_project
 
     modules = {"cpu_composite": cpu_composite, "cpu_project": cpu_project}
-    return [getattr(modules[module], name) for module, names in KERNEL_NAMES.items() for name in names]
+    compositing = [kernel for pair in cpu_composite._KERNELS.values() for kernel in pair]
+    return [getattr(modules[module], name) for module, names in KERNEL_NAMES.items() for name in names] + compositing
 
 
 def kernels_cached() -> bool | None:
@@ -49,13 +49,13 @@ def warm_up() -> float:
     generator = torch.Generator().manual_seed(0)
     count = 8
     means = (torch.rand(count, 3, generator=generator) - 0.5) * torch.tensor([1.0, 1.0, 0.2]) + torch.tensor([0.0, 0.0, 4.0])
-    leaves = [means, torch.randn(count, 4, generator=generator), torch.full((count, 3), 0.15),
-              torch.full((count,), 0.6), torch.rand(count, 3, generator=generator)]
-    for leaf in leaves:
-        leaf.requires_grad_(True)
     K = torch.tensor([[20.0, 0.0, 15.5], [0.0, 20.0, 11.5], [0.0, 0.0, 1.0]])
-    out = rasterize(*leaves, torch.eye(4), K, 32, 24, backend="numba")
-    (out.color.sum() + out.depth.nan_to_num().sum()).backward()
+    for channels in (1, 3, 2):  # the compositing kernels by feature count: gray, RGB, any other (cpu_composite)
+        leaves = [means, torch.randn(count, 4, generator=generator), torch.full((count, 3), 0.15),
+                  torch.full((count,), 0.6), torch.rand(count, channels, generator=generator)]
+        leaves = [leaf.clone().requires_grad_(True) for leaf in leaves]
+        out = rasterize(*leaves, torch.eye(4), K, 32, 24, backend="numba")
+        (out.color.sum() + out.depth.nan_to_num().sum()).backward()
     _warm = True
     return time.perf_counter() - start
 
