@@ -214,6 +214,22 @@ def test_real_views_that_do_not_belong_are_not_registered(odd_one, tmp_path):
     assert code == 3 and report["alignment"]["not_registered"] == ["odd"]
 
 
+def test_a_front_view_of_another_finger_is_refused_where_its_chart_vote_passed(tmp_path):
+    """The front view of finger 1 beside the side views of finger 2: the chart vote takes the front-side pair (32
+    patches at a 45-degree turn, 2.3 times the runner-up) and its first guess finds 64 matches on one epipolar
+    geometry. Through the model the views agree at 5 % of their common points (one finger: 18 % or more), so the
+    guided round drops the pair: exit 3 naming both of finger 2's views, none placed by the other finger's."""
+    data = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
+    if not data.is_dir():
+        pytest.skip("the real dev captures are not here")
+    code = main(["fuse", str(data / "1_1_2_1_0.jpg"), str(data / "2_2_7_1_1.jpg"), str(data / "2_2_7_1_2.jpg"), "-o",
+                 str(tmp_path / "out"), "--no-splat"])
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert code == 3 and report["alignment"]["not_registered"] == ["2_2_7_1_1", "2_2_7_1_2"], report["pairs"]
+    front_side = report["pairs"][0]
+    assert not front_side["ok"] and "different fingers" in front_side["reason"], front_side
+
+
 def _tilted_crop(view: View, degrees: float, columns: slice) -> View:
     """The view's photo turned in its plane and cut at both ends of the finger, with no camera, mask or depth."""
     import cv2

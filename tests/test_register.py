@@ -87,3 +87,21 @@ def test_no_redraw_through_a_lost_focal_or_with_two_views(focal, aligned):
         raise AssertionError("redrawn")
 
     assert _redrawn(alignment, depths, [3000.0] * 3, ([], None), redraw, RegistrationConfig()) is None
+
+
+def test_a_view_no_agreeing_pair_reaches_is_no_longer_aligned():
+    from fingersplat3d.align.register import _still_reached
+    from fingersplat3d.align.solve.global_opt import GlobalAlignment, PairCorrespondences
+
+    def pair(a, b):
+        return PairCorrespondences(a, b, np.zeros((50, 2)), np.zeros((50, 2)), np.ones(50), np.eye(4))
+
+    alignment = GlobalAlignment([np.eye(4)] * 3, [1000.0] * 3, [np.ones((4, 4))] * 3, [1.0] * 3, [1.0] * 3, 0.3, 0.01,
+                                [(0, 1), (0, 2)], [True, True, True], 0, turn_uncertainty_deg=np.full((3, 3), 0.1))
+    assert _still_reached(alignment, [pair(0, 1), pair(0, 2)]) is alignment
+    assert _still_reached(alignment, [pair(0, 1), pair(1, 2)]).aligned == [True, True, True]  # reached through view 1
+    dropped = _still_reached(alignment, [pair(0, 1)])
+    assert dropped.aligned == [True, True, False] and dropped.tree == [(0, 1)]
+    assert np.isnan(dropped.turn_uncertainty_deg[2]).all() and np.isnan(dropped.turn_uncertainty_deg[:, 2]).all()
+    assert dropped.turn_uncertainty_deg[0, 1] == 0.1
+    assert _still_reached(alignment, []).aligned == [True, False, False]

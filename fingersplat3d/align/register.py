@@ -17,7 +17,10 @@ The loop (all numbers scale with the measured ridge period):
    model (:class:`~fingersplat3d.align.correspond.model_predictor.ModelPredictor`) with a search of
    ``guided_search`` periods (pairs that had no first guess, such as views 90 degrees apart, get
    one now), verified, and the alignment is refined from where it stands. The model's error
-   shrinks each round, so the matches come closer to the truth and cover more of the overlap;
+   shrinks each round, so the matches come closer to the truth and cover more of the overlap. A pair must
+   also **agree**: ``min_agreement`` of the points the model puts on both views must match. Views of two
+   fingers pass a chart vote and an epipolar check by chance now and then, never this; a view that only
+   disagreeing pairs placed is placed no longer;
 5. **pointmaps redrawn at the fitted focal** (with a ``redraw`` callable, three views or more): the prior drew each
    view's relief through a guessed pinhole, and where the fitted focal is far from that guess the depth fields had
    to bend the surface to the fitted perspective against their smoothness, which held the focal up (real rig: fitted
@@ -46,7 +49,8 @@ from .correspond.guided import GuidedMatches, RidgeMaps, match_guided
 from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.alignment_problem import median_depth
-from .solve.global_opt import PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
+from .solve.global_opt import (PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align, reached,
+                               spanning_tree)
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
 from .solve.sensitivity import turn_sensitivity_deg
@@ -79,11 +83,20 @@ class RegistrationConfig:
     of the prediction, a repeating ridge cannot be mistaken for its neighbour)."""
     min_matches: int = 40
     """Verified correspondences a pair needs to count as registered."""
+    min_agreement: float = 0.125
+    """Share of the points a guided round searched (those the model puts on the other view's finger) whose verified
+    matches a pair needs to stay registered: views of one finger agree wherever they overlap, views of two fingers
+    only by chance. Measured (verified / searched, every guided round): real dev pairs 18-86 % (the side views 90
+    degrees apart 18-52 %), synthetic 47-100 %, another group's crops 19-100 %; a front view of one real finger
+    against the side views of the other, with every chart vote taken as decisive, 3-9 %."""
     epipolar_px: float = 0.1
     """Fundamental-matrix inlier threshold, in ridge periods (at least 1 pixel)."""
     global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
     """The joint optimisation."""
     photometric: PhotometricConfig = field(default_factory=lambda: PhotometricConfig(iterations=0))
+    """The dense photometric refinement after the guided rounds (without a rig). Off by default (``iterations=0``;
+    ``PhotometricConfig()`` turns it on): measured, it brings the views' ridges into phase but does not make the
+    synthetic depth better nor move the turns (docs/fuse.md)."""
     contour_weight: float = 1.0
     """Weight of each silhouette-contour correspondence (:mod:`~fingersplat3d.align.correspond.contours`) against a
     matched pair's (0 to 1 by its score) in the guided rounds' alignments, with :data:`CONTOUR_MIN_VIEWS` views or
@@ -91,9 +104,6 @@ class RegistrationConfig:
     0.041 mm, uwa 0.112 -> 0.071, cfpose 3 / 5 0.116 / 0.091 -> 0.066 / 0.058; real rig deviation finger 1 (tuned)
     0.62 / 1.09 / 1.20 -> 0.74 / 0.65 / 1.25 degrees, max 4.9 -> 2.3, finger 2 (held out) 0.81 / 1.24 / 1.49 -> 0.28 /
     1.10 / 1.00, max 3.8. Weight 0.3 and the outline itself instead of a pixel inside it were no better."""
-    """The dense photometric refinement after the guided rounds (without a rig). Off by default (``iterations=0``;
-    ``PhotometricConfig()`` turns it on): measured, it brings the views' ridges into phase but does not make the
-    synthetic depth better nor move the turns (docs/fuse.md)."""
     seed: int = 0
     """Seed of the random parts (RANSAC of the pair similarities)."""
     redraw_tolerance: float = 0.05
@@ -272,7 +282,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     rounds = 0
     for _ in range(config.guided_rounds if registered else 0):
         rounds += 1
-        refined = []
+        refined, disagreed = [], set()
         for a, b in pairs:
             if not (alignment.aligned[a] and alignment.aligned[b]):
                 continue
@@ -282,13 +292,24 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             verified = _verified(matches, prepared.period, config)
             record = records[(a, b)]
             record["matches"].append(len(verified))
-            if len(verified) >= config.min_matches:
-                refined.append(_pair_correspondences(a, b, verified, np.eye(4)))
-                record.update(ok=True, reason="")
-            else:
+            agreement = len(verified) / max(matches.tried, 1)
+            if matches.tried and agreement < config.min_agreement:
+                disagreed.add((a, b))
+                record.update(ok=False, reason=f"the views agree at {agreement:.0%} of the {matches.tried} points the model "
+                                               f"puts on both (views of one finger: {config.min_agreement:.1%} or more); "
+                                               f"they may show different fingers")
+            elif len(verified) < config.min_matches:
                 record.update(ok=False, reason=f"only {len(verified)} of {len(matches)} matches through the 3D model agree "
                                                f"on the epipolar geometry; {config.min_matches} are needed")
+            else:
+                refined.append(_pair_correspondences(a, b, verified, np.eye(4)))
+                record.update(ok=True, reason="")
+        # A view placed only by pairs this round found disagreeing is placed no longer; a pair that merely found too
+        # few matches through the model still holds its views by its earlier ones.
+        alignment = _still_reached(alignment, refined + [p for p in fitted if (p.a, p.b) not in disagreed])
+        refined = [p for p in refined if alignment.aligned[p.a] and alignment.aligned[p.b]]
         if not refined:
+            fitted = [p for p in fitted if (p.a, p.b) not in disagreed]
             break
         contours = _contours(alignment, prepared, config) if rig is None else []
         say(f"global alignment, round {rounds}")
@@ -313,6 +334,23 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                                                                config.global_align, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric,
                         list(pointmaps), redrawn_at)
+
+
+def _still_reached(alignment: GlobalAlignment, holding: list[PairCorrespondences]) -> GlobalAlignment:
+    """``alignment`` with the views that ``holding`` (matched pairs) no longer reach from its root marked not aligned
+    (the contours alone never hold a view)."""
+    _, tree = spanning_tree(len(alignment.aligned), holding, alignment.root)
+    still = reached(len(alignment.aligned), alignment.root, tree)
+    aligned = [bool(was and now) for was, now in zip(alignment.aligned, still)]
+    if aligned == list(alignment.aligned):
+        return alignment
+    uncertainty = alignment.turn_uncertainty_deg
+    if uncertainty is not None:
+        uncertainty = uncertainty.copy()
+        lost = ~np.asarray(aligned)
+        uncertainty[lost, :], uncertainty[:, lost] = np.nan, np.nan
+    return replace(alignment, aligned=aligned, tree=[(a, b) for a, b in alignment.tree if aligned[a] and aligned[b]],
+                   turn_uncertainty_deg=uncertainty)
 
 
 def _redrawn(alignment: GlobalAlignment, depths: list[np.ndarray], focals: list[float], solved_with: tuple,

@@ -55,7 +55,7 @@ CASES = {
     "ring2": GeometryCase("ring", 2), "ring3": GeometryCase("ring", 3), "ring5": GeometryCase("ring", 5),
     "uwa2": GeometryCase("uwa", 2), "uwa3": GeometryCase("uwa", 3),
     "cfpose2": GeometryCase("cfpose", 2, (512, 640)), "cfpose3": GeometryCase("cfpose", 3, (512, 640)),
-    "cfpose5": GeometryCase("cfpose", 5, (512, 640)),
+    "cfpose5": GeometryCase("cfpose", 5, (512, 640)), "cfpose10": GeometryCase("cfpose", 10, (512, 640)),
     "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
     "uwa3-close": GeometryCase("uwa", 3, distance_mm=50.0), "uwa3-far": GeometryCase("uwa", 3, distance_mm=400.0),
 }

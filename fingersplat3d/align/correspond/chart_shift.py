@@ -38,7 +38,10 @@ MIN_SUPPORT = 18
 views of different synthetic fingers: 8-15)."""
 MIN_RATIO = 1.3
 """How far the peak must stand above its best rival (real front-side pairs: 1.39-11.7; different fingers
-with more than 12 votes: 1.04-1.8)."""
+with more than 12 votes: 1.04-2.3). Views of two fingers that pass the vote are refused by the guided rounds
+(``RegistrationConfig.min_agreement``). At 1.1 the weakest real pair with its contrast halved (1.18) registers, but a
+mirrored side view passes too (1.16) and its front-side pair then agrees through the model at 15-24 %, as views of
+one finger do: kept at 1.3."""
 RIVAL_TURN_DEG = 20.0
 """A rival shift must differ from the peak by this much turn (or by 3 bins of d_sigma)."""
 _PATCH_PERIODS = 2.0  # patch half-size in ridge periods (patches are placed every half-size)

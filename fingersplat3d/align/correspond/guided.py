@@ -52,13 +52,15 @@ class GuidedMatches:
     score: np.ndarray  # [N] normalised cross-correlation at the peak
     information_a: np.ndarray  # [N, 2, 2] in a's pixels (1 across the ridges)
     information_b: np.ndarray  # [N, 2, 2] in b's pixels
+    tried: int = 0
+    """Points of a's grid that were searched (their prediction on b's finger): the matches are a share of them."""
 
     def __len__(self) -> int:
         return len(self.uv_a)
 
     def subset(self, keep: np.ndarray) -> "GuidedMatches":
         return GuidedMatches(self.uv_a[keep], self.uv_b[keep], self.score[keep], self.information_a[keep],
-                             self.information_b[keep])
+                             self.information_b[keep], self.tried)
 
     @classmethod
     def empty(cls) -> "GuidedMatches":
@@ -197,4 +199,4 @@ def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, per
     information_a = maps_a.information(uv_a, half)
     J_inv = np.linalg.inv(J)
     information_b = np.einsum("nji,njk,nkl->nil", J_inv, information_a, J_inv)
-    return GuidedMatches(uv_a, uv_b, score, information_a, information_b)
+    return GuidedMatches(uv_a, uv_b, score, information_a, information_b, len(index))
