@@ -228,6 +228,7 @@ def test_a_front_view_of_another_finger_is_refused_where_its_chart_vote_passed(t
     assert code == 3 and report["alignment"]["not_registered"] == ["2_2_7_1_1", "2_2_7_1_2"], report["pairs"]
     front_side = report["pairs"][0]
     assert not front_side["ok"] and "different fingers" in front_side["reason"], front_side
+    assert front_side["agreement"] and max(front_side["agreement"]) < 0.125  # measured 0.05
 
 
 def _tilted_crop(view: View, degrees: float, columns: slice) -> View:

@@ -293,6 +293,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             record = records[(a, b)]
             record["matches"].append(len(verified))
             agreement = len(verified) / max(matches.tried, 1)
+            record.setdefault("agreement", []).append(round(agreement, 3) if matches.tried else None)
             if matches.tried and agreement < config.min_agreement:
                 disagreed.add((a, b))
                 record.update(ok=False, reason=f"the views agree at {agreement:.0%} of the {matches.tried} points the model "
