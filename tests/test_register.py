@@ -107,3 +107,19 @@ def test_a_view_no_agreeing_pair_reaches_is_no_longer_aligned():
     assert np.isnan(dropped.turn_uncertainty_deg[2]).all() and np.isnan(dropped.turn_uncertainty_deg[:, 2]).all()
     assert dropped.turn_uncertainty_deg[0, 1] == 0.1
     assert _still_reached(alignment, []).aligned == [True, False, False]
+
+
+def test_a_pair_thinned_for_many_views_keeps_its_weight_and_spreads_evenly():
+    from fingersplat3d.align.correspond.guided import GuidedMatches
+    from fingersplat3d.align.register import _pair_correspondences
+
+    n = 1000
+    uv = np.stack([np.arange(n) % 40, np.arange(n) // 40], 1).astype(float)  # a's grid in raster order
+    score = np.linspace(0.2, 0.9, n)
+    matches = GuidedMatches(uv, uv + 5.0, score, np.tile(np.eye(2), (n, 1, 1)), np.tile(np.eye(2), (n, 1, 1)), 1200)
+    whole = _pair_correspondences(0, 1, matches, np.eye(4))
+    thinned = _pair_correspondences(0, 1, matches, np.eye(4), cap=400)
+    assert len(whole.weight) == n and len(thinned.weight) == 400
+    assert np.isclose(thinned.weight.sum(), whole.weight.sum())
+    assert np.all(np.diff(thinned.uv_a[:, 1] * 40 + thinned.uv_a[:, 0]) <= 3)  # every 2-3 grid points, none skipped more
+    assert _pair_correspondences(0, 1, matches, np.eye(4), cap=2000).weight.shape == (n,)
