@@ -294,6 +294,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan
     fitted = registered
     rounds = 0
+    cap = config.many_views_matches if n_views >= config.many_views else 0  # each pair's matches in the alignment
     for _ in range(config.guided_rounds if registered else 0):
         rounds += 1
         refined, disagreed = [], set()
@@ -317,15 +318,14 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                 record.update(ok=False, reason=f"only {len(verified)} of {len(matches)} matches through the 3D model agree "
                                                f"on the epipolar geometry; {config.min_matches} are needed")
             else:
-                cap = config.many_views_matches if n_views >= config.many_views else 0
                 refined.append(_pair_correspondences(a, b, verified, np.eye(4), cap))
                 record.update(ok=True, reason="")
         # A view placed only by pairs this round found disagreeing is placed no longer; a pair that merely found too
         # few matches through the model still holds its views by its earlier ones.
-        alignment = _still_reached(alignment, refined + [p for p in fitted if (p.a, p.b) not in disagreed])
+        fitted = [p for p in fitted if (p.a, p.b) not in disagreed]
+        alignment = _still_reached(alignment, refined + fitted)
         refined = [p for p in refined if alignment.aligned[p.a] and alignment.aligned[p.b]]
         if not refined:
-            fitted = [p for p in fitted if (p.a, p.b) not in disagreed]
             break
         contours = _contours(alignment, prepared, config) if rig is None else []
         say(f"global alignment, round {rounds}")

@@ -289,7 +289,6 @@ def _compositing_kernels(features: int):
                             image[y, x, f] = acc[y - ty0, x - tx0, f]
         return image, final, consumed
 
-
     @njit(cache=True, parallel=True, fastmath={"contract"})
     def backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
         """:func:`composite_backward`."""
