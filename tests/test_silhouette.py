@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.segment.silhouette import TIP_BASES, orient_frames, silhouette_frame
+from fingersplat3d.pointmaps.prior import finger_height
+from fingersplat3d.segment.silhouette import TIP_BASES, orient_frames, principal_axis, silhouette_frame
 
 
 def crop(rows=300, cols=240, top=60, bottom=90, shift=0.0):
@@ -50,6 +51,42 @@ def test_bevelled_corners_at_the_wide_end_do_not_decide_the_tip():
     assert frame.tip_side == "top" and frame.taper > 0.1
 
 
+def _longest(mask):
+    v, u = np.nonzero(mask)
+    return principal_axis(u, v)[0]
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.3])
+@pytest.mark.parametrize("transpose", [False, True])
+def test_a_crop_shorter_than_wide_keeps_its_axis_between_the_frame_cuts(transpose, shift):
+    """Cut at both ends by the frame, 120 px along the finger and 160-200 px across it."""
+    mask = crop(rows=120, cols=400, top=80, bottom=100, shift=shift)
+    along = np.array([shift, 1.0]) / np.hypot(shift, 1.0)  # (du, dv) of the band
+    if transpose:
+        mask, along = mask.T, along[::-1]
+    assert abs(_longest(mask) @ along) < 0.5  # the trap: its longest direction runs across the finger
+    frame = silhouette_frame(mask)
+    assert abs(frame.axis @ along) > np.cos(np.radians(3))
+    assert frame.tip_basis == "taper" and frame.tip_side == ("left" if transpose else "top")
+    assert abs(finger_height(mask).axis @ frame.axis) == pytest.approx(1.0)  # the prior's relief runs the same way
+
+
+def test_a_stub_entering_the_frame_runs_from_its_cut():
+    """A fingertip that enters the frame less far than it is wide: cut by the right edge, tip to the left."""
+    mask = capsule(rows=260, cols=190, radius=110, tip=120)
+    assert abs(_longest(mask)[0]) < 0.1
+    frame = silhouette_frame(mask)
+    assert abs(frame.axis[0]) > 0.99 and frame.tip_basis == "outline" and frame.tip_side == "left"
+
+
+def test_a_finger_whole_in_the_frame_or_cut_at_a_corner_keeps_its_longest_direction():
+    whole = np.pad(crop(rows=120, cols=400, top=80, bottom=100), 5)
+    corner = np.zeros((300, 300), bool)
+    corner[:200, :120] = True  # cut by the top and the left edges
+    for mask in (whole, corner):
+        assert abs(silhouette_frame(mask).axis @ _longest(mask)) == pytest.approx(1.0)
+
+
 def test_views_of_one_capture_agree_on_the_tip():
     clear_a, clear_b = crop(), crop(top=65, bottom=95)
     unclear = crop(top=80, bottom=78)  # tapers the other way, barely: its own choice would be "bottom"
@@ -70,7 +107,10 @@ def test_a_seen_tip_outweighs_every_taper():
 
 
 def test_frames_stay_finite_on_degenerate_masks():
-    for mask in (np.ones((50, 50), bool), np.pad(np.ones((3, 3), bool), 20), crop(top=70, bottom=70)):
+    corner = np.zeros((20, 30), bool)
+    corner[0, 0] = corner[19, 0] = True  # cut by the top and bottom edges at one column, by the left edge twice
+    for mask in (np.ones((50, 50), bool), np.pad(np.ones((3, 3), bool), 20), crop(top=70, bottom=70),
+                 np.ones((1, 40), bool), np.ones((40, 1), bool), corner):
         frame = silhouette_frame(mask)
         assert np.all(np.isfinite(frame.axis)) and np.isfinite(frame.taper) and frame.tip_side in {"top", "bottom", "left", "right"}
     assert len(orient_frames([crop(top=70, bottom=70)] * 2)) == 2

@@ -1,12 +1,14 @@
 """Synthetic fingers cut straight across at both ends, and with flatter sections than the generator draws.
 
-    python3 tools/bench_synth_crops.py [--seeds 3] [--height-ratio 0.45] [--keep 0.1,0.85]
+    python3 tools/bench_synth_crops.py [--seeds 3] [--height-ratio 0.45] [--keep 0.1,0.85] [--frame]
 
 Another group's crops (docs/measurements.md) show no fingertip and a flat section; this checks the same conditions on
 ``fs3d synth`` fingers, where the truth is known. Per seed, a ring capture (-45 / 0 / +45 fused) is made with the
 finger's section height over width set to ``--height-ratio`` (the generator draws 0.68-0.95; 0 keeps its draw), then
 every view is cut by the same two planes across the finger axis, at the shares ``--keep`` of the front view's
 silhouette along it (the tip cap and the crease fall outside with the default), and fused from images and masks alone.
+With ``--frame`` the views are instead cropped there, the way datasets publish normalised crops: the frame itself cuts
+the finger at both ends (the same image columns in every view, the cameras' principal points moved with the crop).
 Prints rotation and depth errors per seed (:func:`~fingersplat3d.experiments.geometry.score_geometry`).
 """
 from __future__ import annotations
@@ -43,6 +45,24 @@ def cut_across(capture, keep: tuple[float, float]):
     return Capture(tuple(views), capture.metadata)
 
 
+def crop_frame(capture, keep: tuple[float, float]):
+    """``capture`` with every view cropped to the image columns at the shares ``keep`` of the front view's silhouette
+    along the finger (the ring rig's finger runs along the image rows): the frame cuts the finger at both ends."""
+    from fingersplat3d.scene import Camera, Capture
+
+    cols = np.nonzero(capture["v2"].mask.any(0))[0]
+    first, last = (int(round(cols.min() + share * (cols.max() - cols.min()))) for share in keep)
+    views = []
+    for view in capture.views:
+        K = view.camera.K.copy()
+        K[0, 2] -= first
+        camera = Camera(K, view.camera.world_to_cam, last - first + 1, view.height)
+        columns = slice(first, last + 1)
+        views.append(view.with_(image=np.ascontiguousarray(view.image[:, columns]), mask=view.mask[:, columns].copy(),
+                                depth=np.ascontiguousarray(view.depth[:, columns]), camera=camera))
+    return Capture(tuple(views), capture.metadata)
+
+
 def main() -> int:
     import fingersplat3d.synth.generate as generate
     from fingersplat3d.experiments.geometry import RING_ANGLES, GeometryCase, _measure_case
@@ -53,6 +73,7 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--height-ratio", type=float, default=0.45, help="section height over width (0: the generator's)")
     parser.add_argument("--keep", default="0.1,0.85", help="the cut planes, as shares of the front silhouette's length")
+    parser.add_argument("--frame", action="store_true", help="crop the views there instead (the frame cuts the finger)")
     args = parser.parse_args()
     keep = tuple(float(x) for x in args.keep.split(","))
     drawn = generate.random_finger_params
@@ -63,10 +84,10 @@ def main() -> int:
         for seed in range(args.seeds):
             capture = synthesize(seed, SynthConfig(rig="ring", size=(640, 512), angles=RING_ANGLES)).capture
             path = Path(folder) / f"crop-{seed}.pkl"
-            path.write_bytes(pickle.dumps(cut_across(capture, keep)))
+            path.write_bytes(pickle.dumps((crop_frame if args.frame else cut_across)(capture, keep)))
             paths.append(str(path))
         rows = _measure_case(GeometryCase("ring", 3), paths, FuseConfig(splat=None))
-    print(f"height ratio {args.height_ratio:g} (0: drawn), cut at {keep}:")
+    print(f"height ratio {args.height_ratio:g} (0: drawn), {'cropped' if args.frame else 'cut'} at {keep}:")
     for r in rows:
         if r["status"] != "done":
             print(f"seed {r['seed']}: failed, {r['reason']}")

@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
-from ..segment.silhouette import chord_sections, principal_axis
+from ..segment.silhouette import chord_sections, finger_axis
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -159,7 +159,7 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = principal_axis(u, v)
+    axis, origin = finger_axis(mask)
     normal = np.array([-axis[1], axis[0]])
     # Coordinates along (s) and across (t) the axis, for the mask pixels only.
     du, dv = u - origin[0], v - origin[1]

@@ -3,10 +3,12 @@
 A distal phalanx is close to a *generalised cylinder*: a cross-section swept along a nearly
 straight axis, shrinking over the fingertip cap. Its silhouette is described by
 
-* the axis: the principal direction of the mask pixels, oriented toward the fingertip (the end
-  of the silhouette that the image border does not cut; on a crop cut at both ends, the end the
-  finger narrows toward, agreed over all views of a capture; see :func:`silhouette_frame` and
-  :func:`orient_frames`);
+* the axis: the line between the frame's two cuts on a crop cut at both ends, else the principal
+  direction of the mask pixels (:func:`finger_axis`: a crop shorter along the finger than across it
+  keeps its axis), oriented toward the
+  fingertip (the end of the silhouette that the image border does not cut; on a crop cut at both
+  ends, the end the finger narrows toward, agreed over all views of a capture; see
+  :func:`silhouette_frame` and :func:`orient_frames`);
 * at every 1-pixel station ``s`` along the axis, the chord across the silhouette: half-width
   ``w(s)`` and centre ``c(s)`` in the across coordinate ``t``; chords cut by the image border are
   completed from their neighbours (the finger goes on beyond the frame), both are median filtered
@@ -22,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "chord_sections", "silhouette_frame", "orient_frames",
-           "local_quadratic", "TIP_BASES"]
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "chord_sections", "silhouette_frame",
+           "orient_frames", "local_quadratic", "TIP_BASES"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -66,6 +68,51 @@ def principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray
     if values[1] - values[0] <= 1e-9 * max(values[1], 1e-12):
         return np.array([1.0, 0.0]), centre  # round blob: any direction is an axis
     return vectors[:, 1], centre
+
+
+CUT_DOMINANCE = 2.0
+"""An image edge cuts the finger (:func:`finger_axis`) when it holds this many times as many of the mask's pixels as
+each edge that does not."""
+
+
+def finger_axis(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit axis direction of a finger mask and the centroid of its pixels (x axis when undefined).
+
+    A finger that the frame cuts at two opposite edges (a crop cut at both ends) runs from the middle of one cut to the
+    middle of the other, whatever the crop's shape: a crop cut shorter along the finger than across it has its
+    longest direction across the finger, and a short crop of an inclined finger has it far off the finger. Otherwise
+    the axis is the principal direction of the pixels (:func:`principal_axis`), unless the frame cuts the finger at
+    one edge and that direction runs more than 45 degrees off the way from the cut's middle to the centroid (a
+    fingertip entering the frame less far than it is wide): the axis is then that way. The frame's cuts are the edges
+    holding :data:`CUT_DOMINANCE` times as many mask pixels as any other edge; a finger whole in the frame, or cut at
+    two adjacent edges, keeps its principal direction. The sign is arbitrary (see :func:`silhouette_frame`).
+    """
+    mask = np.asarray(mask, bool)
+    rows, cols = mask.shape
+    v, u = np.nonzero(mask)
+    axis, centre = principal_axis(u, v)
+    if u.size < 2:
+        return axis, centre
+    edges = [v == 0, v == rows - 1, u == 0, u == cols - 1]  # top, bottom, left, right: opposite ones paired
+    counts = np.array([int(edge.sum()) for edge in edges])
+
+    def cuts(chosen: list[int]) -> bool:
+        others = [counts[i] for i in range(4) if i not in chosen]
+        return bool(counts[chosen].min() > 0 and counts[chosen].min() >= CUT_DOMINANCE * max(others))
+
+    def middle(i: int) -> np.ndarray:
+        return np.array([u[edges[i]].mean(), v[edges[i]].mean()])
+
+    for pair in ([0, 1], [2, 3]):
+        through = middle(pair[1]) - middle(pair[0]) if cuts(pair) else np.zeros(2)
+        if float(np.linalg.norm(through)) >= 1.0:  # (a one-pixel strip is cut by both edges at once)
+            return through / np.linalg.norm(through), centre
+    for i in range(4):
+        inward = centre - middle(i) if cuts([i]) else np.zeros(2)
+        length = float(np.linalg.norm(inward))
+        if length >= 1.0 and abs(float(np.dot(axis, inward))) < np.sqrt(0.5) * length:
+            return inward / length, centre  # the longest direction is more than 45 degrees off the way in
+    return axis, centre
 
 
 def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float) -> Sections:
@@ -201,7 +248,7 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = principal_axis(u, v)
+    axis, origin = finger_axis(mask)
     on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
 
     def chords(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, Sections]:
