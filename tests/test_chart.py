@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from fingersplat3d.align.correspond.chart import CylinderChart
-from fingersplat3d.align.correspond.chart_shift import estimate_chart_shift
+from fingersplat3d.align.correspond.chart_shift import RIVAL_TURN_DEG, chart_shift_candidates, estimate_chart_shift
 from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 from fingersplat3d.eval.poses import rotation_angle_deg
 from fingersplat3d.synth import SynthConfig, synthesize
@@ -62,3 +62,20 @@ def test_different_fingers_do_not_give_a_decisive_turn(finger):
     period = estimate_ridge_period(finger["center"].image, finger["center"].mask)
     shift = estimate_chart_shift(_unwrapped(finger["center"], period), _unwrapped(other["left"], period), period)
     assert shift is None or not shift.decisive
+
+
+def test_the_vote_s_further_peaks_come_after_its_first(finger):
+    """The peaks an undecided vote is tried at: the first is the vote's own shift, the others lower and each beyond
+    the rival reach of the ones before it (a turn RIVAL_TURN_DEG away, or a d_sigma 3 bins away)."""
+    period = estimate_ridge_period(finger["center"].image, finger["center"].mask)
+    a, b = _unwrapped(finger["center"], period), _unwrapped(finger["left"], period)
+    peaks = chart_shift_candidates(a, b, period, 4)
+    assert 2 <= len(peaks) <= 4 and peaks[0] == estimate_chart_shift(a, b, period)
+    assert peaks[0].ratio >= 1.0 and all(peak.ratio < 1.0 for peak in peaks[1:])
+    bin_size = max(1.0, 0.45 * period / a.step)
+    for i, later in enumerate(peaks):
+        for earlier in peaks[:i]:
+            apart_turn = abs(np.degrees(later.turn - earlier.turn)) > RIVAL_TURN_DEG - 3.0  # peaks sit in bins
+            apart_sigma = abs(later.d_sigma - earlier.d_sigma) > 2.0 * bin_size * a.step
+            assert apart_turn or apart_sigma
+    assert chart_shift_candidates(a, b, period, 1) == peaks[:1]

@@ -123,3 +123,21 @@ def test_a_pair_thinned_for_many_views_keeps_its_weight_and_spreads_evenly():
     assert np.isclose(thinned.weight.sum(), whole.weight.sum())
     assert np.all(np.diff(thinned.uv_a[:, 1] * 40 + thinned.uv_a[:, 0]) <= 3)  # every 2-3 grid points, none skipped more
     assert _pair_correspondences(0, 1, matches, np.eye(4), cap=2000).weight.shape == (n,)
+
+
+def test_views_whose_votes_are_all_undecided_are_placed_by_agreement_through_the_model(uwa640, monkeypatch):
+    """Every chart vote undecided (the ratio it must reach raised out of reach): with ``undecided_peaks`` off no view
+    is placed but the root; on, each view is placed at the vote peak whose model its pair agrees with, and the turns
+    are those of the decisive votes (synthetic: within a few degrees)."""
+    import fingersplat3d.align.correspond.chart_shift as chart_shift
+
+    monkeypatch.setattr(chart_shift, "MIN_RATIO", 1e9)
+    off = _register(uwa640.views, RegistrationConfig(undecided_peaks=0, guided_rounds=0))
+    assert sum(off.alignment.aligned) == 1
+    result = _register(uwa640.views)
+    assert all(result.alignment.aligned)
+    placed = [record for record in result.pairs if "placed_by_agreement" in record]
+    assert len(placed) == 2 and all(record["placed_by_agreement"] >= 0.25 for record in placed)
+    assert all(any("agreement" in peak for peak in record["undecided_peaks"]) for record in placed)
+    truth = [view.camera.world_to_cam for view in uwa640.views]
+    assert np.max(relative_rotation_errors(result.alignment.world_to_cam, truth)) < 3.0

@@ -12,7 +12,9 @@ The loop (all numbers scale with the measured ridge period):
    similarity ``b_to_a`` comes from the two pointmaps at the matched pixels
    (:func:`~fingersplat3d.align.solve.pairwise.register_pair`);
 3. **global alignment** of all registered pairs from their maximum spanning tree
-   (:func:`~fingersplat3d.align.solve.global_opt.global_align`);
+   (:func:`~fingersplat3d.align.solve.global_opt.global_align`); a view no decisive vote placed is then tried at
+   its undecided votes' best peaks, each placed and matched again through the model it makes, and placed by the
+   peak its views agree with (``RegistrationConfig.undecided_peaks``);
 4. **guided rounds**: every pair of aligned views is matched again, predicted through the 3D
    model (:class:`~fingersplat3d.align.correspond.model_predictor.ModelPredictor`) with a search of
    ``guided_search`` periods (pairs that had no first guess, such as views 90 degrees apart, get
@@ -42,7 +44,8 @@ from ..pointmaps.base import Pointmap
 from ..scene import View
 from ..segment.silhouette import TIP_BASES, orient_frames, silhouette_frame
 from .correspond.chart import CylinderChart
-from .correspond.chart_shift import ChartPredictor, estimate_chart_shift
+from .correspond.chart_shift import (MIN_SUPPORT, RIVAL_TURN_DEG, ChartPredictor, chart_shift_candidates,
+                                     estimate_chart_shift)
 from .correspond.contours import contour_correspondences
 from .correspond.epipolar import fundamental_inliers
 from .correspond.guided import GuidedMatches, RidgeMaps, match_guided
@@ -113,6 +116,21 @@ class RegistrationConfig:
     1.10 / 1.00, max 3.8. Weight 0.3 and the outline itself instead of a pixel inside it were no better."""
     seed: int = 0
     """Seed of the random parts (RANSAC of the pair similarities)."""
+    undecided_peaks: int = 3
+    """A view no decisive chart vote placed is tried at this many peaks (with ``MIN_SUPPORT`` votes) of each of its
+    undecided votes with a placed view: each peak's first guess placed, and the pair matched again through the model
+    that makes. The peak whose views agree best places the view, when their agreement reaches
+    ``undecided_agreement`` and ``undecided_margin`` times that of any peak turning the view elsewhere (beyond
+    ``RIVAL_TURN_DEG``: peaks of one shift smeared in the vote place it alike). 0 turns this off. Measured: the
+    weakest real pair with its contrast halved (vote 1.18 times its rival) agrees at 0.40 and is placed (the
+    capture's three turns then 0.5-1.9 degrees from the rig's mean); a left-right mirrored side view's peaks agree at
+    0.11-0.18, another finger's at 0; synthetic views with every vote undecided at 0.65-1.0."""
+    undecided_agreement: float = 0.25
+    """The agreement through the model a peak must reach to place a view no decisive vote placed: twice
+    ``min_agreement``, above a mirrored view's 0.18 (one finger's views at full contrast: 0.27-0.86 on the real
+    front-side pairs)."""
+    undecided_margin: float = 1.5
+    """How many times better than any peak turning the view elsewhere the placing peak must agree."""
     redraw_tolerance: float = 0.05
     """With a ``redraw`` callable, the pointmaps are drawn again when the fitted focal is further than this share
     from the one they were drawn with (closer, the perspective barely changes the relief)."""
@@ -287,6 +305,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     align = global_align if rig is None else (lambda d, f, c, cfg, previous=None, min_turns=None:
                                               rig_align(d, f, c, cfg, rig, sizes, previous))
     alignment = align(depths, focals, registered, config.global_align)
+    if config.undecided_peaks > 0 and config.matcher == "surface" and rig is None and not all(alignment.aligned):
+        say("undecided votes: their peaks through the model")
+        alignment = _placed_by_agreement(alignment, registered, pairs, records, prepared, charts, unwrapped, pointmaps,
+                                         align, config, rng)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
     # Each pair's least turn from the silhouettes: held by hinge rows only where GlobalAlignConfig.turn_bound_weight > 0.
     min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals))
@@ -350,6 +372,79 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                                                                config.global_align, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric,
                         list(pointmaps), redrawn_at)
+
+
+def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
+                         prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
+                         rng) -> GlobalAlignment:
+    """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
+    (``RegistrationConfig.undecided_peaks``); ``registered`` grows by the pairs that place them."""
+    from scipy.spatial.transform import Rotation
+
+    from .correspond.features import Matches
+    from .solve.pairwise import register_pair
+
+    depths, focals = [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps]
+    period = prepared.period
+    done = set()  # pairs tried: a view placed here can reach further views on the next pass
+    placing = True
+    while placing:
+        placing = False
+        for view in range(len(alignment.aligned)):
+            if alignment.aligned[view]:
+                continue
+            tried = []  # (agreement, pair, first-guess correspondences, trial alignment)
+            for pair in pairs:
+                a, b = pair
+                record = records[pair]
+                other = a if b == view else b if a == view else None
+                if other is None or not alignment.aligned[other] or record["ok"] or "turn_ratio" not in record or pair in done:
+                    continue
+                done.add(pair)
+                for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], period, config.undecided_peaks):
+                    entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
+                    record.setdefault("undecided_peaks", []).append(entry)
+                    if shift.support < MIN_SUPPORT:
+                        continue
+                    guess = match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift),
+                                         period, config.first_search * period)
+                    verified = _verified(guess, period, config)
+                    entry["matches"] = len(verified)
+                    if len(verified) < config.min_matches:
+                        continue
+                    similarity = register_pair(pointmaps[a], pointmaps[b], Matches(verified.uv_a, verified.uv_b,
+                                                                                   verified.score, config.matcher), rng=rng)
+                    if not similarity.ok:
+                        continue
+                    first = _pair_correspondences(a, b, verified, similarity.matrix)
+                    trial = align(depths, focals, registered + [first], config.global_align)
+                    if not (trial.aligned[a] and trial.aligned[b]):
+                        continue
+                    through = match_guided(prepared.maps[a], prepared.maps[b], ModelPredictor.from_alignment(trial, a, b),
+                                           period, config.guided_search * period)
+                    agreement = len(_verified(through, period, config)) / max(through.tried, 1)
+                    entry["agreement"] = round(agreement, 3)
+                    tried.append((agreement, pair, first, trial))
+            if not tried:
+                continue
+            tried.sort(key=lambda t: -t[0])
+            best = tried[0]
+            # The runner-up is the best peak that turns the view elsewhere: peaks of one shift smeared in the vote place
+            # it alike (seen against a view placed before, as the trials may root their trees apart).
+            anchor = alignment.root
+
+            def turn(trial: GlobalAlignment) -> np.ndarray:
+                return trial.world_to_cam[view][:3, :3] @ trial.world_to_cam[anchor][:3, :3].T
+
+            runner_up = max((agreement for agreement, _, _, trial in tried[1:]
+                             if np.degrees(Rotation.from_matrix(turn(trial) @ turn(best[3]).T).magnitude()) > RIVAL_TURN_DEG),
+                            default=0.0)
+            if best[0] >= config.undecided_agreement and best[0] >= config.undecided_margin * runner_up:
+                registered.append(best[2])
+                alignment = best[3]
+                records[best[1]].update(ok=True, reason="", placed_by_agreement=round(best[0], 3))
+                placing = True
+    return alignment
 
 
 def _still_reached(alignment: GlobalAlignment, holding: list[PairCorrespondences]) -> GlobalAlignment:

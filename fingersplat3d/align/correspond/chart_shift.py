@@ -29,7 +29,7 @@ import numpy as np
 from ...device import cpu_threads, single_threaded
 from .chart import MAX_CHART_ANGLE, CylinderChart, Unwrapped
 
-__all__ = ["ChartShift", "estimate_chart_shift", "ChartPredictor"]
+__all__ = ["ChartShift", "estimate_chart_shift", "chart_shift_candidates", "ChartPredictor"]
 
 MIN_PATCH_NCC = 0.3
 """A patch votes only when its best correlation reaches this."""
@@ -41,7 +41,8 @@ MIN_RATIO = 1.3
 with more than 12 votes: 1.04-2.3). Views of two fingers that pass the vote are refused by the guided rounds
 (``RegistrationConfig.min_agreement``). At 1.1 the weakest real pair with its contrast halved (1.18) registers, but a
 mirrored side view passes too (1.16) and its front-side pair then agrees through the model at 15-24 %, as views of
-one finger do: kept at 1.3."""
+one finger do: kept at 1.3. A view no decisive vote places is tried at its votes' best peaks instead
+(``RegistrationConfig.undecided_peaks``), where it must agree far better than that."""
 RIVAL_TURN_DEG = 20.0
 """A rival shift must differ from the peak by this much turn (or by 3 bins of d_sigma)."""
 _PATCH_PERIODS = 2.0  # patch half-size in ridge periods (patches are placed every half-size)
@@ -100,11 +101,19 @@ def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.nd
 
 def estimate_chart_shift(a: Unwrapped, b: Unwrapped, period: float) -> ChartShift | None:
     """The shift of b's unwrapped texture against a's, by patch voting (see the module); None when no patch votes."""
+    found = chart_shift_candidates(a, b, period, 1)
+    return found[0] if found else None
+
+
+def chart_shift_candidates(a: Unwrapped, b: Unwrapped, period: float, count: int) -> list[ChartShift]:
+    """The ``count`` best-voted shifts of b's unwrapped texture against a's, best first: each further peak of the
+    vote's histogram lies beyond the rival reach of every peak before it. The first is :func:`estimate_chart_shift`'s;
+    a later one's ``ratio`` (its peak over the best other, the first) is below 1. Empty when no patch votes."""
     half = max(4, int(round(_PATCH_PERIODS * period / a.step)))
     max_shift = int(round(_MAX_SIGMA_SHIFT * a.radius / a.step))
     votes = _patch_votes(a, b, half, max_shift)
     if len(votes) == 0:
-        return None
+        return []
     bin_size = max(1.0, _BIN_PERIODS * period / a.step)
     d_row, d_col, weight = votes[:, 0], votes[:, 1], votes[:, 2] - MIN_PATCH_NCC + 0.05
     low_row, low_col = d_row.min() - 3 * bin_size, d_col.min() - 3 * bin_size
@@ -112,21 +121,29 @@ def estimate_chart_shift(a: Unwrapped, b: Unwrapped, period: float) -> ChartShif
     histogram = np.zeros(shape)
     np.add.at(histogram, (((d_row - low_row) / bin_size).astype(int), ((d_col - low_col) / bin_size).astype(int)), weight)
     histogram = cv2.GaussianBlur(histogram, (0, 0), 1.0)
-    peak = np.unravel_index(int(np.argmax(histogram)), shape)
-    # The runner-up is looked for beyond RIVAL_TURN of the peak: the chart's errors smear one true
-    # shift along the turn over several bins (measured on real captures: sub-peaks 7-18 degrees away).
+    # A rival is looked for beyond RIVAL_TURN of a peak: the chart's errors smear one true shift along the turn
+    # over several bins (measured on real captures: sub-peaks 7-18 degrees away).
     reach = max(3, int(np.ceil(np.radians(RIVAL_TURN_DEG) * b.radius / b.step / bin_size)))
-    others = histogram.copy()
-    others[max(0, peak[0] - reach):peak[0] + reach + 1, max(0, peak[1] - 3):peak[1] + 4] = 0.0
-    centre_row = low_row + (peak[0] + 0.5) * bin_size
-    centre_col = low_col + (peak[1] + 0.5) * bin_size
-    near = (np.abs(d_row - centre_row) < 2 * bin_size) & (np.abs(d_col - centre_col) < 2 * bin_size)
-    row_shift = float(np.average(d_row[near], weights=weight[near]))
-    col_shift = float(np.average(d_col[near], weights=weight[near]))
-    middle_a = (a.image.shape[0] - 1) / 2.0
-    turn = float(b.angle(middle_a - row_shift))  # theta_b where theta_a = 0
-    return ChartShift(turn, -col_shift * a.step, int(near.sum()), len(votes),
-                      float(histogram[peak] / max(float(others.max()), 1e-12)))
+    remaining = histogram.copy()
+    shifts = []
+    while len(shifts) < count and remaining.max() > 0.0:
+        peak = np.unravel_index(int(np.argmax(remaining)), shape)
+        region = (slice(max(0, peak[0] - reach), peak[0] + reach + 1), slice(max(0, peak[1] - 3), peak[1] + 4))
+        others = histogram.copy()
+        others[region] = 0.0
+        remaining[region] = 0.0
+        centre_row = low_row + (peak[0] + 0.5) * bin_size
+        centre_col = low_col + (peak[1] + 0.5) * bin_size
+        near = (np.abs(d_row - centre_row) < 2 * bin_size) & (np.abs(d_col - centre_col) < 2 * bin_size)
+        if not near.any():  # a peak of the smoothing alone, between votes
+            continue
+        row_shift = float(np.average(d_row[near], weights=weight[near]))
+        col_shift = float(np.average(d_col[near], weights=weight[near]))
+        middle_a = (a.image.shape[0] - 1) / 2.0
+        turn = float(b.angle(middle_a - row_shift))  # theta_b where theta_a = 0
+        shifts.append(ChartShift(turn, -col_shift * a.step, int(near.sum()), len(votes),
+                                 float(histogram[peak] / max(float(others.max()), 1e-12))))
+    return shifts
 
 
 @dataclass(frozen=True, eq=False)
