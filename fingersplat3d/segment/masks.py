@@ -15,7 +15,11 @@ any exposure: 16-bit data that only uses the bottom of the range works too):
    in a thin band inside a first, low-threshold mask and averaged locally, since the lit side's
    rim is brighter than the shaded side's. The midpoint of a blurred step is where the edge is,
    so the outline lands on the true silhouette on both sides; a plain Otsu split (between the
-   background and the *mean* skin) cuts off the darker rim;
+   background and the *mean* skin) cuts off the darker rim. Skin lit from one side darkens
+   gradually toward its far flank, and the band there reads skin brighter than the rim: the level
+   is read again inside the mask each midpoint gives, while that moves the edge out by more than
+   1 % of the area and leaves the mask as solid (area over convex hull; light spilt on the
+   background in stripes, such as projected fringes, would grow it unevenly);
 4. skin darker than that midpoint (valleys, the crease, the shaded side) still clears a noise
    floor; the noise-floor mask, eroded by 2 px (more than its outward bias), fills such notches,
    but only where a closing of the skin mask encloses them: a dim glow or support under the
@@ -49,6 +53,9 @@ ROUGH_LEVEL = 0.25  # share of the skin contrast above which the first, rough ma
 NOTCH_RADIUS_SCALE = 4  # notches (valleys, a crease) narrower than this many closing radii are filled
 DARK_BORDER_SHARE = 0.35  # a border ring darker than this share of the bright end is a dark background
 EDGE_BAND = (1.5, 4.0)  # band inside the rough mask (px from its edge) where the edge skin level is read
+EDGE_ROUNDS = 8  # at most this many more reads of the edge level, inside the mask the last one gave
+EDGE_GROWTH = 0.01  # a read is kept when its mask is larger than the last one's by more than this share
+EDGE_SOLIDITY_LOSS = 0.01  # ... and its largest piece's solidity (area / convex hull) is not lower by more than this
 
 
 def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
@@ -149,14 +156,46 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
         raise InputError(f"{name}: no finger found (nothing stands out from the background noise)")
     floor = bg_level + max(MIN_CONTRAST_SIGMAS * bg_noise, 0.05 * contrast)
     # A first mask from a low threshold keeps the darker skin at the silhouette; the skin level
-    # at the silhouette is read in a thin band inside it. That level differs between the lit and
-    # the shaded side, so it is averaged locally (normalised Gaussian over ~1.5 % of the image
-    # size), on a grid a few times coarser than the image, which is all such a smooth map needs.
-    rough = (smooth > max(floor, bg_level + ROUGH_LEVEL * contrast)).view(np.uint8)
-    inside = cv2.distanceTransform(rough, cv2.DIST_L2, 3)
+    # at the silhouette is read in a thin band inside it.
+    region = (smooth > max(floor, bg_level + ROUGH_LEVEL * contrast)).view(np.uint8)
+    midpoint = _edge_midpoint(smooth, region, bg_level, floor)
+    if midpoint is None:
+        return floor, np.full_like(smooth, max(floor, bg_level + 0.5 * contrast))
+    # Skin shaded toward one side (light from the other) darkens gradually to a rim far dimmer than the band read: the
+    # midpoint then cuts inside the finger. Read again inside the mask it gives, as long as that moves the edge out
+    # and leaves the mask as solid (light spilt on the background, such as projected fringes, grows it in stripes).
+    region = (smooth > midpoint).view(np.uint8)
+    area, solid = int(np.count_nonzero(region)), _solidity(region)
+    for _ in range(EDGE_ROUNDS):
+        again = _edge_midpoint(smooth, region, bg_level, floor)
+        if again is None:
+            break
+        grown = (smooth > again).view(np.uint8)
+        if np.count_nonzero(grown) <= area * (1.0 + EDGE_GROWTH) or _solidity(grown) < solid - EDGE_SOLIDITY_LOSS:
+            break
+        midpoint, region, area, solid = again, grown, int(np.count_nonzero(grown)), _solidity(grown)
+    return floor, midpoint
+
+
+def _solidity(mask8: np.ndarray) -> float:
+    """Area over convex-hull area of the largest piece of ``mask8`` (1: convex; 0 when empty)."""
+    contours, _ = cv2.findContours(mask8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if not contours:
+        return 0.0
+    largest = max(contours, key=cv2.contourArea)
+    hull = cv2.contourArea(cv2.convexHull(largest))
+    return float(cv2.contourArea(largest) / hull) if hull > 0 else 0.0
+
+
+def _edge_midpoint(smooth: np.ndarray, region: np.ndarray, bg_level: float, floor: float) -> np.ndarray | None:
+    """Per pixel, the midpoint between the background and the skin level read in a thin band inside ``region``
+    (uint8); None when the band is too thin to read. That level differs between the lit and the shaded side, so it is
+    averaged locally (normalised Gaussian over ~1.5 % of the image size), on a grid a few times coarser than the
+    image, which is all such a smooth map needs."""
+    inside = cv2.distanceTransform(region, cv2.DIST_L2, 3)
     band = ((inside >= EDGE_BAND[0]) & (inside <= EDGE_BAND[1])).astype(np.float32)
     if np.count_nonzero(band) < 16:
-        return floor, np.full_like(smooth, max(floor, bg_level + 0.5 * contrast))
+        return None
     height, width = smooth.shape
     sigma = max(2.0, 0.015 * max(height, width))
     factor = max(1, int(sigma // 2))
@@ -168,7 +207,7 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
     edge_level = float(total.sum() / max(weight.sum(), 1e-12))  # where no band is near
     local = np.where(weight > 1e-4, total / np.maximum(weight, 1e-4), edge_level).astype(np.float32)
     midpoint = np.maximum(floor, 0.5 * (bg_level + local))
-    return floor, cv2.resize(midpoint, (width, height), interpolation=cv2.INTER_LINEAR)
+    return cv2.resize(midpoint, (width, height), interpolation=cv2.INTER_LINEAR)
 
 
 def _otsu(values: np.ndarray, low: float, high: float, bins: int = 256) -> float:
