@@ -203,8 +203,38 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
         record["reason"] = (f"the unwrapped ridge textures agree on no single turn ({shift.support} of {shift.patches} "
                             f"patches at the best one, {shift.ratio:.2f} times the runner-up)")
         return GuidedMatches.empty()
-    predictor = ChartPredictor(charts[a], charts[b], shift)
-    return match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period, config.first_search * prepared.period)
+    return _chart_guess(prepared, a, b, charts, shift, config)
+
+
+def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: RegistrationConfig) -> GuidedMatches:
+    """A pair's first-guess matches: predicted through both charts shifted by ``shift``, searched ``first_search``
+    ridge periods around."""
+    return match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift), prepared.period,
+                        config.first_search * prepared.period)
+
+
+def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: int,
+                   config: RegistrationConfig) -> tuple[GuidedMatches, GuidedMatches, float]:
+    """A pair matched through the 3D model of ``alignment``: the matches, the verified ones, and their agreement (the
+    verified share of the points searched; 0 where none was)."""
+    matches = match_guided(prepared.maps[a], prepared.maps[b], ModelPredictor.from_alignment(alignment, a, b),
+                           prepared.period, config.guided_search * prepared.period)
+    verified = _verified(matches, prepared.period, config)
+    return matches, verified, len(verified) / max(matches.tried, 1)
+
+
+def _similar_pair(pointmaps, a: int, b: int, verified: GuidedMatches, config: RegistrationConfig,
+                  rng) -> tuple[PairCorrespondences | None, str]:
+    """The pair's correspondences with the similarity its two pointmaps fit at the ``verified`` matches, or None and
+    why not."""
+    from .correspond.features import Matches
+    from .solve.pairwise import register_pair
+
+    similarity = register_pair(pointmaps[a], pointmaps[b], Matches(verified.uv_a, verified.uv_b, verified.score,
+                                                                   config.matcher), rng=rng)
+    if not similarity.ok:
+        return None, similarity.reason
+    return _pair_correspondences(a, b, verified, similarity.matrix), ""
 
 
 def _classic_guess(prepared: _Prepared, a: int, b: int, config: RegistrationConfig) -> GuidedMatches:
@@ -259,9 +289,6 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     its cameras in order. ``period_px``: the views' ridge period (the median of theirs), when already measured.
     ``redraw``: the views' pointmaps drawn through a given focal (pixels), for step 5 of the module docstring.
     """
-    from .correspond.features import Matches
-    from .solve.pairwise import register_pair
-
     say = progress or (lambda text: None)
     n_views = len(views)
     pairs = [(a, b) for a in range(n_views) for b in range(a + 1, n_views)] if pairs is None else list(pairs)
@@ -291,12 +318,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             record["reason"] = record["reason"] or (f"only {len(verified)} of {len(guess)} matches agree on the epipolar "
                                                     f"geometry; {config.min_matches} are needed")
             continue
-        similarity = register_pair(pointmaps[a], pointmaps[b], Matches(verified.uv_a, verified.uv_b, verified.score, config.matcher),
-                                   rng=rng)
-        if not similarity.ok:
-            record["reason"] = f"the pointmaps do not fit one similarity: {similarity.reason}"
+        pair, why = _similar_pair(pointmaps, a, b, verified, config, rng)
+        if pair is None:
+            record["reason"] = f"the pointmaps do not fit one similarity: {why}"
             continue
-        registered.append(_pair_correspondences(a, b, verified, similarity.matrix))
+        registered.append(pair)
         record.update(ok=True, reason="")
     depths = [pointmap.depth for pointmap in pointmaps]
     focals = [pointmap.focal for pointmap in pointmaps]
@@ -324,12 +350,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             if not (alignment.aligned[a] and alignment.aligned[b]):
                 continue
             say(f"guided round {rounds} {views[a].name}-{views[b].name}")
-            predictor = ModelPredictor.from_alignment(alignment, a, b)
-            matches = match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period, config.guided_search * prepared.period)
-            verified = _verified(matches, prepared.period, config)
+            matches, verified, agreement = _through_model(prepared, alignment, a, b, config)
             record = records[(a, b)]
             record["matches"].append(len(verified))
-            agreement = len(verified) / max(matches.tried, 1)
             record.setdefault("agreement", []).append(round(agreement, 3) if matches.tried else None)
             if matches.tried and agreement < config.min_agreement:
                 disagreed.add((a, b))
@@ -379,10 +402,9 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                          rng) -> GlobalAlignment:
     """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
     (``RegistrationConfig.undecided_peaks``); ``registered`` grows by the pairs that place them."""
-    from scipy.spatial.transform import Rotation
+    import torch
 
-    from .correspond.features import Matches
-    from .solve.pairwise import register_pair
+    from ..rotations import rotation_angle
 
     depths, focals = [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps]
     period = prepared.period
@@ -406,23 +428,17 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     record.setdefault("undecided_peaks", []).append(entry)
                     if shift.support < MIN_SUPPORT:
                         continue
-                    guess = match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift),
-                                         period, config.first_search * period)
-                    verified = _verified(guess, period, config)
+                    verified = _verified(_chart_guess(prepared, a, b, charts, shift, config), period, config)
                     entry["matches"] = len(verified)
                     if len(verified) < config.min_matches:
                         continue
-                    similarity = register_pair(pointmaps[a], pointmaps[b], Matches(verified.uv_a, verified.uv_b,
-                                                                                   verified.score, config.matcher), rng=rng)
-                    if not similarity.ok:
+                    first, _ = _similar_pair(pointmaps, a, b, verified, config, rng)
+                    if first is None:
                         continue
-                    first = _pair_correspondences(a, b, verified, similarity.matrix)
                     trial = align(depths, focals, registered + [first], config.global_align)
                     if not (trial.aligned[a] and trial.aligned[b]):
                         continue
-                    through = match_guided(prepared.maps[a], prepared.maps[b], ModelPredictor.from_alignment(trial, a, b),
-                                           period, config.guided_search * period)
-                    agreement = len(_verified(through, period, config)) / max(through.tried, 1)
+                    _, _, agreement = _through_model(prepared, trial, a, b, config)
                     entry["agreement"] = round(agreement, 3)
                     tried.append((agreement, pair, first, trial))
             if not tried:
@@ -433,11 +449,11 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
             # it alike (seen against a view placed before, as the trials may root their trees apart).
             anchor = alignment.root
 
-            def turn(trial: GlobalAlignment) -> np.ndarray:
-                return trial.world_to_cam[view][:3, :3] @ trial.world_to_cam[anchor][:3, :3].T
+            def turn(trial: GlobalAlignment) -> torch.Tensor:
+                return torch.as_tensor(trial.world_to_cam[view][:3, :3] @ trial.world_to_cam[anchor][:3, :3].T)
 
             runner_up = max((agreement for agreement, _, _, trial in tried[1:]
-                             if np.degrees(Rotation.from_matrix(turn(trial) @ turn(best[3]).T).magnitude()) > RIVAL_TURN_DEG),
+                             if float(torch.rad2deg(rotation_angle(turn(trial), turn(best[3])))) > RIVAL_TURN_DEG),
                             default=0.0)
             if best[0] >= config.undecided_agreement and best[0] >= config.undecided_margin * runner_up:
                 registered.append(best[2])

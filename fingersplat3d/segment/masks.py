@@ -165,15 +165,20 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
     # midpoint then cuts inside the finger. Read again inside the mask it gives, as long as that moves the edge out
     # and leaves the mask as solid (light spilt on the background, such as projected fringes, grows it in stripes).
     region = (smooth > midpoint).view(np.uint8)
-    area, solid = int(np.count_nonzero(region)), _solidity(region)
+    area, solid = int(np.count_nonzero(region)), None  # the solidity only where a read grows the mask
     for _ in range(EDGE_ROUNDS):
         again = _edge_midpoint(smooth, region, bg_level, floor)
         if again is None:
             break
         grown = (smooth > again).view(np.uint8)
-        if np.count_nonzero(grown) <= area * (1.0 + EDGE_GROWTH) or _solidity(grown) < solid - EDGE_SOLIDITY_LOSS:
+        grown_area = int(np.count_nonzero(grown))
+        if grown_area <= area * (1.0 + EDGE_GROWTH):
             break
-        midpoint, region, area, solid = again, grown, int(np.count_nonzero(grown)), _solidity(grown)
+        solid = _solidity(region) if solid is None else solid
+        grown_solid = _solidity(grown)
+        if grown_solid < solid - EDGE_SOLIDITY_LOSS:
+            break
+        midpoint, region, area, solid = again, grown, grown_area, grown_solid
     return floor, midpoint
 
 

@@ -125,6 +125,7 @@ def chart_shift_candidates(a: Unwrapped, b: Unwrapped, period: float, count: int
     # over several bins (measured on real captures: sub-peaks 7-18 degrees away).
     reach = max(3, int(np.ceil(np.radians(RIVAL_TURN_DEG) * b.radius / b.step / bin_size)))
     remaining = histogram.copy()
+    middle_a = (a.image.shape[0] - 1) / 2.0
     shifts = []
     while len(shifts) < count and remaining.max() > 0.0:
         peak = np.unravel_index(int(np.argmax(remaining)), shape)
@@ -139,7 +140,6 @@ def chart_shift_candidates(a: Unwrapped, b: Unwrapped, period: float, count: int
             continue
         row_shift = float(np.average(d_row[near], weights=weight[near]))
         col_shift = float(np.average(d_col[near], weights=weight[near]))
-        middle_a = (a.image.shape[0] - 1) / 2.0
         turn = float(b.angle(middle_a - row_shift))  # theta_b where theta_a = 0
         shifts.append(ChartShift(turn, -col_shift * a.step, int(near.sum()), len(votes),
                                  float(histogram[peak] / max(float(others.max()), 1e-12))))
