@@ -400,6 +400,17 @@ def test_numeric_options_are_range_checked_in_one_sentence(two_fingers, tmp_path
     assert len(lines) == 1 and option in lines[0] and not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize("command", [["synth", "{out}", "--seed", "-1"], ["fuse", "{out}", "-o", "{out}/x", "--seed", "-2"],
+                                     ["bench", "-o", "{out}/x", "--seeds", "0"]])
+def test_seeds_are_range_checked_in_one_sentence(tmp_path, capsys, command):
+    """A negative seed had reached numpy's generator and ended in its traceback."""
+    from fingersplat3d.cli import main
+
+    assert main([part.format(out=tmp_path / "s") for part in command]) == 2
+    lines = _stderr_lines(capsys.readouterr().err)
+    assert len(lines) == 1 and "--seed" in lines[0] and not (tmp_path / "s").exists()
+
+
 def test_an_error_inside_fuse_is_the_last_line_not_mixed_into_the_progress_bar(two_fingers, tmp_path, capsys):
     from fingersplat3d.cli import main
 

@@ -102,6 +102,8 @@ def test_tiny_image_and_border():
     (np.zeros((64, 80), np.float32), "no finger"),
     (np.full((64, 80), 0.5, np.float32), "no finger"),
     (np.random.default_rng(0).normal(0.05, 0.01, (64, 80)).clip(0, 1).astype(np.float32), "no finger"),
+    # ridges on a strip thinner than the border rings (GrabCut had no finger to start from and asserted)
+    (np.tile((0.5 + 0.3 * np.sin(np.arange(1280) / 1.3)).astype(np.float32), (10, 1)), "too thin"),
 ])
 def test_no_finger_is_an_input_error(image, problem):
     assert problem in raises_naming("left.png", finger_mask, image, name="left.png")

@@ -8,7 +8,7 @@ from ..atomic import atomic_dir, check_free
 from ..errors import InputError
 from ..splat.config import PRESETS
 from .common import finished
-from .types import size
+from .types import COUNT, size
 
 __all__ = ["add", "run"]
 
@@ -26,7 +26,7 @@ def add(commands) -> None:
                     "depth error, rotation error and held-out PSNR; with --real, the rig consistency of real "
                     "captures per working resolution. Writes bench.csv, summary.md, trade_depth.png and trade_psnr.png.")
     bench.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
-    bench.add_argument("--seeds", type=int, default=2, help="synthetic fingers per setting (default 2)")
+    bench.add_argument("--seeds", type=COUNT, default=2, help="synthetic fingers per setting (default 2)")
     bench.add_argument("--size", type=size, default=(640, 512), help="synthetic image size WxH (default 640x512)")
     bench.add_argument("--preset", choices=sorted(PRESETS), default="fast", help="the baseline preset (default fast)")
     bench.add_argument("--presets", default="fast,balanced",

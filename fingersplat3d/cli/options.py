@@ -8,7 +8,7 @@ from ..align.register import MATCHERS, RegistrationConfig
 from ..align.solve.photometric import PhotometricConfig
 from ..splat.config import DEFAULT_PRESET, PRESETS, preset
 from ..working_scale import RIDGE_PX
-from .types import COUNT, POSITIVE, STEPS, number
+from .types import COUNT, POSITIVE, SEED, STEPS, number
 
 __all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "ridge_px", "read_rig"]
 
@@ -23,7 +23,7 @@ def add_registration_arguments(parser) -> None:
                         help="after the guided rounds, refine each view's surface densely on the ridge texture every other "
                              "view sees (~2 s; brings the views' ridges into phase, for texturing and prints; it does not "
                              "move the turns, and on synthetic fingers it does not make the depth better: docs/fuse.md)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random parts (RANSAC)")
+    parser.add_argument("--seed", type=SEED, default=0, help="seed of the random parts (RANSAC)")
     parser.add_argument("--ridge-px", type=number(float, 0.0, 1000.0), default=RIDGE_PX,
                         help=f"working pixels per ridge period (default {RIDGE_PX:g}): photos that sample the ridges more "
                              "finely (large camera photos) are scaled down for the geometry and the fit, and the outputs "

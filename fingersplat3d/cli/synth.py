@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..atomic import check_free
 from ..synth.rigs import CAMERA_DISTANCE_MM
-from .types import COUNT, POSITIVE, angles, number, size
+from .types import COUNT, POSITIVE, SEED, angles, number, size
 
 DISTANCE = number(float, 30.0, 2000.0)
 
@@ -29,7 +29,7 @@ def add(commands) -> None:
                        help="uwa: 3 cameras at -45/0/+45 deg, finger horizontal, gray 1280x1024; "
                             "cfpose: one camera, finger rolled/pitched per shot, RGB 1024x1280; "
                             "ring: cameras at --angles (default: uwa)")
-    synth.add_argument("--seed", type=int, default=0, help="random seed of the first finger (default 0)")
+    synth.add_argument("--seed", type=SEED, default=0, help="random seed of the first finger (default 0)")
     synth.add_argument("--count", type=COUNT, default=1, help="number of fingers (seeds seed..seed+count-1)")
     synth.add_argument("--size", type=size, help="image size WxH (default: the rig's)")
     synth.add_argument("--focal", type=POSITIVE, help="focal length in pixels (default: ~36 mm of finger across the long side)")

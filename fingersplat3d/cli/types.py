@@ -38,6 +38,8 @@ def number(kind, low: float, high: float = float("inf"), low_inclusive: bool = T
 COUNT = number(int, 1)
 STEPS = number(int, 0, 1_000_000)
 POSITIVE = number(float, 0.0, 1e6, low_inclusive=False)
+SEED = number(int, 0)
+"""Random seeds: numpy's generators take non-negative integers."""
 
 
 def angle_list(text: str) -> tuple[float, ...]:

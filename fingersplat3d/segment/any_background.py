@@ -158,6 +158,8 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     evidence = _ridge_evidence(gray)
     pad = _pad(evidence)
     ring = _ring(gray.shape, ring_width)
+    if ring.all():  # a strip thinner than two border rings: nothing inside them to be a finger
+        raise InputError(f"{name}: no finger found: the image is {width}x{height} pixels, too thin to hold one")
     labels = np.where(ring, cv2.GC_BGD, cv2.GC_PR_FGD).astype(np.uint8)
     if pad is not None:  # skin where the finger enters the frame is not sure background; the pad is sure finger
         labels[ring & (_colour_distance(colour, pad, 0.02) < SKIN_DISTANCE)] = cv2.GC_PR_BGD
