@@ -101,6 +101,25 @@ def test_turn_uncertainty_is_symmetric_and_grows_with_the_noise(capture):
     assert np.isnan(turn_uncertainty_deg(problem, [True, True, False])[0, 2])
 
 
+def test_the_curvature_asked_for_afterwards_is_the_solves_own(capture):
+    """A registration solves without the curvature and asks for it once, from the problem set up again at the
+    solution (turn_uncertainty_of): the same as the solve's own, the rotations' tangent taken at the solution."""
+    from fingersplat3d.align.solve.global_opt import turn_uncertainty_of
+
+    rng = np.random.default_rng(3)
+    pairs = [_exact_pair(capture, a, b, rng, tilt=0.03, noise_px=0.5) for a, b in ((0, 1), (1, 2), (0, 2))]
+    depths = [v.depth * (1.0 + 0.1 * np.sin(np.arange(v.width) / 40.0))[None, :] for v in capture.views]
+    focal = capture.views[0].camera.K[0, 0]
+    solved = global_align(depths, focal, pairs)
+    without = global_align(depths, focal, pairs, uncertainty=False)
+    assert without.turn_uncertainty_deg is None
+    again = turn_uncertainty_of(without, depths, focal, pairs)
+    off = ~np.eye(3, dtype=bool)
+    assert np.isnan(np.diag(again)).all() and (again[off] > 0).all()
+    assert np.allclose(again[off], solved.turn_uncertainty_deg[off], rtol=0.02)
+    assert turn_uncertainty_of(without, depths, focal, []) is None  # nothing matched: no curvature
+
+
 def test_fuse_reports_the_turn_uncertainty_of_every_pair(capture):
     from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.scene import Capture

@@ -35,7 +35,7 @@ registered pair reaches stay unaligned (the caller decides what that means). Pur
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Callable, Sequence
 
 import numpy as np
@@ -53,7 +53,7 @@ from .correspond.model_predictor import ModelPredictor
 from .correspond.texture import as_gray, estimate_ridge_period, ridge_texture
 from .solve.alignment_problem import median_depth
 from .solve.global_opt import (PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align, reached,
-                               spanning_tree)
+                               spanning_tree, turn_uncertainty_of)
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
 from .solve.sensitivity import turn_sensitivity_deg
@@ -328,8 +328,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
     sizes = [(view.width, view.height) for view in views]
-    align = global_align if rig is None else (lambda d, f, c, cfg, previous=None, min_turns=None:
-                                              rig_align(d, f, c, cfg, rig, sizes, previous))
+    # Each solve without its curvature: only the last one's is reported, asked for once at the end.
+    align = (partial(global_align, uncertainty=False) if rig is None else
+             (lambda d, f, c, cfg, previous=None, min_turns=None: rig_align(d, f, c, cfg, rig, sizes, previous)))
     alignment = align(depths, focals, registered, config.global_align)
     if config.undecided_peaks > 0 and config.matcher == "surface" and rig is None and not all(alignment.aligned):
         say("undecided votes: their peaks through the model")
@@ -389,6 +390,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         say("photometric refinement")
         alignment, photometric = refine_alignment(alignment, depths, focals, fitted, config.global_align, prepared.textures,
                                                   prepared.masks, prepared.period, config.photometric, min_turns)
+    if rig is None and config.global_align.solver == "lm":
+        alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
+                                                                                config.global_align, solved_with[1]))
     if rig is None and config.global_align.solver == "lm" and sum(alignment.aligned) >= 2:
         say("how sure: probing the focal")
         alignment = replace(alignment, turn_sensitivity_deg=turn_sensitivity_deg(alignment, depths, focals, solved_with[0],
@@ -501,5 +505,5 @@ def _redrawn(alignment: GlobalAlignment, depths: list[np.ndarray], focals: list[
     start = replace(alignment, fields=[np.zeros_like(f) for f in alignment.fields], relief_scale=list(reliefs),
                     scales=list(np.asarray(alignment.scales) / ratio))
     solved = global_align([pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], solved_with[0], align_config,
-                          previous=start, min_turns=solved_with[1])
+                          previous=start, min_turns=solved_with[1], uncertainty=False)
     return solved, pointmaps, focal

@@ -188,9 +188,15 @@ def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, per
     exclusion = max(2, int(round(0.6 * period)))
     texture_a, texture_b = maps_a.texture, maps_b.texture
     # Patches in parallel on the process's threads (OpenCV releases the GIL), OpenCV itself on one each.
-    with single_threaded(), ThreadPoolExecutor(cpu_threads()) as pool:
-        results = list(pool.map(lambda i: _match_one(texture_a, texture_b, grid[i], prediction[i], jacobian[i], half,
-                                                     search, exclusion), index))
+    # A few chunks per thread, not a task per point: a task's hand-off cost as much as a small patch's search.
+    threads = cpu_threads()
+    chunks = np.array_split(index, min(len(index), 4 * threads)) if len(index) else []
+
+    def chunk(points: np.ndarray) -> list:
+        return [_match_one(texture_a, texture_b, grid[i], prediction[i], jacobian[i], half, search, exclusion) for i in points]
+
+    with single_threaded(), ThreadPoolExecutor(threads) as pool:
+        results = [r for part in pool.map(chunk, chunks) for r in part]
     uv_b = np.array([r[0] for r in results]).reshape(-1, 2)
     score = np.array([r[1] for r in results])
     uniqueness = np.array([r[2] for r in results])

@@ -38,7 +38,7 @@ from .levenberg import levenberg_marquardt, turn_uncertainty_deg
 from .optimize import minimize
 
 __all__ = ["PairCorrespondences", "GlobalAlignConfig", "GlobalAlignment", "global_align", "spanning_tree", "reached",
-           "weighted_median"]
+           "turn_uncertainty_of", "weighted_median"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,9 +247,7 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
     scene = median_depth(depths[root])
     grids = field_grids(depths, config)
     if previous is not None:
-        initial = InitialState(np.stack([p[:3, :3] for p in previous.cam_to_world]), np.stack([p[:3, 3] for p in previous.cam_to_world]),
-                               np.log(previous.scales), np.log(previous.relief_scale), np.log(previous.focals),
-                               [np.asarray(f, np.float64) for f in previous.fields])
+        initial = _state_of(previous)
     else:
         rotations, translations, log_scales = _chain(n_views, root, tree, pairs, scene)
         shared = np.full(n_views, np.exp(np.mean(np.log(guesses)))) if config.shared_focal else guesses
@@ -270,6 +268,30 @@ def global_align(depths: Sequence[np.ndarray], focal_guess: float | Sequence[flo
                                config.polish_rounds)
     result = alignment_result(problem, depths, grids, data, root, tree, aligned, history)
     return replace(result, turn_uncertainty_deg=curvature)
+
+
+def _state_of(alignment: GlobalAlignment) -> InitialState:
+    """A solved alignment as the start of another solve."""
+    return InitialState(np.stack([p[:3, :3] for p in alignment.cam_to_world]), np.stack([p[:3, 3] for p in alignment.cam_to_world]),
+                        np.log(alignment.scales), np.log(alignment.relief_scale), np.log(alignment.focals),
+                        [np.asarray(f, np.float64) for f in alignment.fields])
+
+
+def turn_uncertainty_of(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess: float | Sequence[float],
+                        pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig = GlobalAlignConfig(),
+                        min_turns: np.ndarray | None = None) -> np.ndarray | None:
+    """``alignment.turn_uncertainty_deg`` of a solved alignment, from its problem set up again at the solution: the
+    arguments are those :func:`global_align` solved it with. A registration solves several times and reports only the
+    last, so it asks for the curvature once, here (with ten views each one cost over a second). None without
+    correspondences."""
+    n_views = len(depths)
+    guesses = np.broadcast_to(np.asarray(focal_guess, np.float64), (n_views,)).copy()
+    problem, data = alignment_problem(depths, guesses, pairs, config, field_grids(depths, config), _state_of(alignment),
+                                      alignment.aligned, alignment.root, min_turns)
+    if not len(data.weight):
+        return None
+    with single_threaded():
+        return turn_uncertainty_deg(problem, alignment.aligned)
 
 
 def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: Sequence[PairCorrespondences],
