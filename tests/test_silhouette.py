@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from fingersplat3d.pointmaps.prior import finger_height
-from fingersplat3d.segment.silhouette import TIP_BASES, orient_frames, principal_axis, silhouette_frame
+from fingersplat3d.segment.silhouette import TIP_BASES, capture_axes, orient_frames, principal_axis, silhouette_frame
 
 
 def crop(rows=300, cols=240, top=60, bottom=90, shift=0.0):
@@ -69,6 +69,40 @@ def test_a_crop_shorter_than_wide_keeps_its_axis_between_the_frame_cuts(transpos
     assert abs(frame.axis @ along) > np.cos(np.radians(3))
     assert frame.tip_basis == "taper" and frame.tip_side == ("left" if transpose else "top")
     assert abs(finger_height(mask).axis @ frame.axis) == pytest.approx(1.0)  # the prior's relief runs the same way
+
+
+def _cut_inside(half_width: float, shift: float = 0.0) -> np.ndarray:
+    """A crop cut straight across the finger at both ends inside the frame (black all round): 120 px along the
+    finger (vertical) and ``2 * half_width`` across it, its sides leaning ``shift`` px per row."""
+    return np.pad(crop(rows=120, cols=400, top=half_width, bottom=half_width + 8, shift=shift), 20)
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.3])
+def test_views_of_crops_cut_inside_the_frame_agree_on_the_axis(shift):
+    """Three views of one crop cut inside the frame, shorter along the finger than across it: no outline tells its
+    ends from its sides, but the capture's do, its length along the finger the same in every view and its width not."""
+    views = [_cut_inside(72, shift), _cut_inside(92, shift), _cut_inside(76, shift)]
+    along = np.array([shift, 1.0]) / np.hypot(shift, 1.0)
+    # The trap: each one's longest way runs across the finger, or along a leaning crop's diagonal.
+    assert all(abs(_longest(mask) @ along) < np.cos(np.radians(30)) for mask in views)
+    hints = capture_axes(views)
+    assert all(hint is not None and abs(hint @ along) > np.cos(np.radians(3)) for hint in hints)
+    for frame in orient_frames(views):  # the charts and the contours read these
+        assert abs(frame.axis @ along) > np.cos(np.radians(3))
+    assert abs(finger_height(views[1], hint=hints[1]).axis @ along) > np.cos(np.radians(3))  # the prior's relief
+
+
+def test_the_capture_gives_no_axis_where_its_views_cannot_tell():
+    alike = [_cut_inside(80)] * 3  # the same outline in every view: a round section, nothing to compare
+    assert capture_axes(alike) == [None] * 3
+    assert capture_axes([_cut_inside(80)]) == [None]  # one view
+    framed = crop(rows=120, cols=400, top=72, bottom=80)  # cut by the frame: its own cuts give its axis
+    hints = capture_axes([framed, _cut_inside(92), _cut_inside(76)])
+    assert hints[0] is None and all(hint is not None for hint in hints[1:])
+    turned = np.ascontiguousarray(_cut_inside(92).T)  # a view whose outline runs another way: no shared direction
+    assert capture_axes([_cut_inside(72), turned, _cut_inside(76)]) == [None] * 3
+    whole = [np.pad(crop(rows=400, cols=240, top=60, bottom=70 + 10 * k), 20) for k in range(3)]
+    assert capture_axes(whole) == [None] * 3  # longer than wide: their own axes already run along the finger
 
 
 def test_a_stub_entering_the_frame_runs_from_its_cut():

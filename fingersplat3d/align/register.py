@@ -42,7 +42,7 @@ import numpy as np
 
 from ..pointmaps.base import Pointmap
 from ..scene import View
-from ..segment.silhouette import TIP_BASES, orient_frames, silhouette_frame
+from ..segment.silhouette import TIP_BASES, capture_axes, orient_frames, silhouette_frame
 from .correspond.chart import CylinderChart
 from .correspond.chart_shift import (MIN_SUPPORT, RIVAL_TURN_DEG, ChartPredictor, chart_shift_candidates,
                                      estimate_chart_shift)
@@ -169,7 +169,7 @@ class _Prepared:
     def outlines(self) -> list:
         """Each mask's :func:`~fingersplat3d.segment.silhouette.silhouette_frame`, made once (the contours of every
         guided round and view pair read them)."""
-        return [silhouette_frame(mask) for mask in self.masks]
+        return [silhouette_frame(mask, hint=hint) for mask, hint in zip(self.masks, capture_axes(self.masks))]
 
     @cached_property
     def maps(self) -> list[RidgeMaps]:

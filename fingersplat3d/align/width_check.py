@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..segment.silhouette import silhouette_frame
+from ..segment.silhouette import capture_axes, silhouette_frame
 
 __all__ = ["typical_half_width", "turn_lower_bounds_deg", "least_turns_deg", "WIDTH_TOLERANCE"]
 
@@ -38,9 +38,10 @@ read from noise would push right turns apart. Measured on another group's crops:
 13-23 degrees apart moved from <= 0.2 to <= 1.4 degrees off."""
 
 
-def typical_half_width(mask: np.ndarray) -> float:
-    """The median chord half-width (pixels) over the middle half of a finger silhouette (no tip cap, no cut end)."""
-    width = silhouette_frame(mask).sections.half_width
+def typical_half_width(mask: np.ndarray, hint: np.ndarray | None = None) -> float:
+    """The median chord half-width (pixels) over the middle half of a finger silhouette (no tip cap, no cut end);
+    ``hint``: the axis of an outline the frame does not cut (:func:`~fingersplat3d.segment.silhouette.capture_axes`)."""
+    width = silhouette_frame(mask, hint=hint).sections.half_width
     count = width.size
     return float(np.median(width[count // 4:max(count - count // 4, count // 4 + 1)]))
 
@@ -70,4 +71,5 @@ def least_turns_deg(masks: Sequence[np.ndarray], depths: Sequence[np.ndarray], f
     for mask, depth in zip(masks, depths):
         inside = depth[mask & np.isfinite(depth)]
         typical.append(float(np.median(inside)) if inside.size else float("nan"))
-    return turn_lower_bounds_deg([typical_half_width(mask) for mask in masks], typical, focals)
+    hints = capture_axes(masks)
+    return turn_lower_bounds_deg([typical_half_width(mask, hint) for mask, hint in zip(masks, hints)], typical, focals)

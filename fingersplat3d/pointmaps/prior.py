@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
-from ..segment.silhouette import chord_sections, finger_axis
+from ..segment.silhouette import capture_axes, chord_sections, finger_axis
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -104,18 +104,24 @@ class PriorBackend:
                 raise InputError(f"prior backend: {field_name} must be a finite number in {interval}, got {value!r}")
 
     def predict_views(self, views: Sequence[View]) -> list[Pointmap]:
-        """One own-frame pointmap per view, on the view's pixel grid."""
-        return [self.predict_view(index, view) for index, view in enumerate(views)]
+        """One own-frame pointmap per view, on the view's pixel grid; outlines the frame does not cut take the axis
+        the views agree on (:func:`~fingersplat3d.segment.silhouette.capture_axes`)."""
+        masks = [self._mask(view) for view in views]
+        hints = capture_axes(masks)
+        return [self._predict(index, view, mask, hint) for index, (view, mask, hint) in enumerate(zip(views, masks, hints))]
 
-    def predict_view(self, index: int, view: View) -> Pointmap:
-        mask = view.mask
-        if mask is None:
-            mask = finger_mask(view.image, name=f"view {view.name!r}")
-        elif not mask.any():
+    @staticmethod
+    def _mask(view: View) -> np.ndarray:
+        if view.mask is None:
+            return finger_mask(view.image, name=f"view {view.name!r}")
+        if not view.mask.any():
             raise InputError(f"view {view.name!r}: the mask is empty")
+        return view.mask
+
+    def _predict(self, index: int, view: View, mask: np.ndarray, hint: np.ndarray | None) -> Pointmap:
         focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
-                               focal if self.perspective else None)
+                               focal if self.perspective else None, hint)
         points = height_to_points(relief.height, mask, focal)
         return Pointmap(index, points, relief.confidence, float(focal))
 
@@ -143,7 +149,7 @@ def height_to_points(height: np.ndarray, mask: np.ndarray, focal: float) -> np.n
 
 
 def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float = 0.15,
-                  confidence_knee: float = 0.8, focal: float | None = None) -> FingerHeight:
+                  confidence_knee: float = 0.8, focal: float | None = None, hint: np.ndarray | None = None) -> FingerHeight:
     """Relief (pixels) and confidence of a finger silhouette under the swept-section model.
 
     With ``focal`` (pixels) the relief is ray cast in perspective: the model is the swept
@@ -154,12 +160,12 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     iterates rise monotonically to the first hit without overshooting. Off the
     optical axis the camera sees round the finger's side and over its tip, so the relief
     seen at a pixel is the model's a little further from the image centre. Without ``focal``
-    the relief is orthographic, ``h(p)``.
+    the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s.
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = finger_axis(mask)
+    axis, origin = finger_axis(mask, hint)
     normal = np.array([-axis[1], axis[0]])
     # Coordinates along (s) and across (t) the axis, for the mask pixels only.
     du, dv = u - origin[0], v - origin[1]

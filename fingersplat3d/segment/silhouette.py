@@ -20,12 +20,14 @@ Used by the ``prior`` pointmap backend (relief from the chords) and by the cylin
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
+import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "chord_sections", "silhouette_frame",
-           "orient_frames", "local_quadratic", "TIP_BASES"]
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
+           "silhouette_frame", "orient_frames", "local_quadratic", "TIP_BASES"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -75,7 +77,7 @@ CUT_DOMINANCE = 2.0
 each edge that does not."""
 
 
-def finger_axis(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Unit axis direction of a finger mask and the centroid of its pixels (x axis when undefined).
 
     A finger that the frame cuts at two opposite edges (a crop cut at both ends) runs from the middle of one cut to the
@@ -85,14 +87,27 @@ def finger_axis(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     one edge and that direction runs more than 45 degrees off the way from the cut's middle to the centroid (a
     fingertip entering the frame less far than it is wide): the axis is then that way. The frame's cuts are the edges
     holding :data:`CUT_DOMINANCE` times as many mask pixels as any other edge; a finger whole in the frame, or cut at
-    two adjacent edges, keeps its principal direction. The sign is arbitrary (see :func:`silhouette_frame`).
+    two adjacent edges, keeps its principal direction. ``hint``: for a mask the frame does not cut, the axis the
+    capture's views agree on (:func:`capture_axes`), taken instead of the principal direction. The sign is arbitrary
+    (see :func:`silhouette_frame`).
     """
     mask = np.asarray(mask, bool)
-    rows, cols = mask.shape
     v, u = np.nonzero(mask)
     axis, centre = principal_axis(u, v)
     if u.size < 2:
         return axis, centre
+    by_frame = _frame_axis(u, v, mask.shape, axis, centre)
+    if by_frame is not None:
+        return by_frame, centre
+    if hint is not None and float(np.linalg.norm(hint)) > 0:
+        return np.asarray(hint, np.float64) / float(np.linalg.norm(hint)), centre
+    return axis, centre
+
+
+def _frame_axis(u: np.ndarray, v: np.ndarray, shape: tuple[int, int], axis: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """The axis the frame's cuts give (:func:`finger_axis`), None where they give none (no cut, or a principal direction
+    that already runs within 45 degrees of the way in from a single cut)."""
+    rows, cols = shape
     edges = [v == 0, v == rows - 1, u == 0, u == cols - 1]  # top, bottom, left, right: opposite ones paired
     counts = np.array([int(edge.sum()) for edge in edges])
 
@@ -106,13 +121,109 @@ def finger_axis(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for pair in ([0, 1], [2, 3]):
         through = middle(pair[1]) - middle(pair[0]) if cuts(pair) else np.zeros(2)
         if float(np.linalg.norm(through)) >= 1.0:  # (a one-pixel strip is cut by both edges at once)
-            return through / np.linalg.norm(through), centre
+            return through / np.linalg.norm(through)
     for i in range(4):
         inward = centre - middle(i) if cuts([i]) else np.zeros(2)
         length = float(np.linalg.norm(inward))
         if length >= 1.0 and abs(float(np.dot(axis, inward))) < np.sqrt(0.5) * length:
-            return inward / length, centre  # the longest direction is more than 45 degrees off the way in
-    return axis, centre
+            return inward / length  # the longest direction is more than 45 degrees off the way in
+    return None
+
+
+AXES_AGREEMENT_DEG = 20.0
+""":func:`capture_axes`: the uncut views' outlines must run one way within this (up to a quarter turn), as cameras
+turned about a finger, or a finger rolled before one camera, see its axis one way in every view."""
+EXTENT_STEADINESS = 2.0
+""":func:`capture_axes`: the extents along the axis taken vary this many times less over the views than across it."""
+MIN_EXTENT_SPREAD = 0.02
+""":func:`capture_axes`: the least spread (standard deviation of the log extents) of the varying direction: below it
+the views' outlines say nothing (a round section, views seen alike)."""
+
+
+def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
+    """Per view of one capture, the axis its uncut outline is given (:func:`finger_axis`'s ``hint``), or None.
+
+    A crop cut straight across at both ends *inside* the frame (a finger cut out on a black background) may be
+    shorter along the finger than across it, and no outline alone tells its ends from its sides. A capture does:
+    cut across the finger, every view shows the same stretch of it, so its length along the finger is the same in
+    every view, while the width across it changes with the view as the section turns (wider than high).
+
+    So when two or more views are uncut by the frame and their outlines run one way (:data:`AXES_AGREEMENT_DEG`, up
+    to a quarter turn), each view's length along their mean direction and across it is measured from the middle of
+    one end to the middle of the other (:func:`_end_to_end`). The direction whose lengths stay steadier over the views
+    by :data:`EXTENT_STEADINESS` (the other's spreading by at least :data:`MIN_EXTENT_SPREAD`) runs along the finger.
+    An uncut view whose own principal direction runs more than :data:`AXES_AGREEMENT_DEG` off its line between the
+    ends that way (across the finger, or along a near-square crop's diagonal) takes that line for its axis, as a
+    crop takes the line between the frame's cuts; the others keep theirs. Otherwise (one uncut view, views seen
+    alike, outlines that run different ways) no view gets one.
+    """
+    hints: list[np.ndarray | None] = [None] * len(masks)
+    free = []
+    for index, mask in enumerate(masks):
+        mask = np.asarray(mask, bool)
+        v, u = np.nonzero(mask)
+        if u.size < 16:
+            continue
+        axis, centre = principal_axis(u, v)
+        if any(int(edge.sum()) for edge in (v == 0, v == mask.shape[0] - 1, u == 0, u == mask.shape[1] - 1)):
+            continue  # the frame cuts it: its own cuts say more
+        free.append((index, axis, _outline(mask, centre)))
+    if len(free) < 2:
+        return hints
+    # Each view's outline direction up to a quarter turn (along the finger or across it: the tangents' 4 theta
+    # averaged; a near-square crop's principal direction can run along its diagonal), then theirs averaged alike.
+    angles = np.array([np.angle(np.exp(4j * np.arctan2(tangents[:, 1], tangents[:, 0])).sum()) / 4.0
+                       for _, _, (_, tangents) in free])
+    mean = float(np.angle(np.exp(4j * angles).sum())) / 4.0
+    off = np.abs((angles - mean + np.pi / 4.0) % (np.pi / 2.0) - np.pi / 4.0)
+    if off.max() > np.radians(AXES_AGREEMENT_DEG):
+        return hints
+    first, second = np.array([np.cos(mean), np.sin(mean)]), np.array([-np.sin(mean), np.cos(mean)])
+    spans = [[_end_to_end(*outline, d) for d in (first, second)] for _, _, outline in free]
+    lengths = np.array([[float(np.linalg.norm(span)) + 1.0 for span in pair] for pair in spans])
+    spread_first, spread_second = np.std(np.log(lengths), axis=0)
+    if max(spread_first, spread_second) < MIN_EXTENT_SPREAD:
+        return hints
+    if spread_first * EXTENT_STEADINESS <= spread_second:
+        chosen, along = first, 0
+    elif spread_second * EXTENT_STEADINESS <= spread_first:
+        chosen, along = second, 1
+    else:
+        return hints
+    for (index, axis, _), pair in zip(free, spans):
+        length = float(np.linalg.norm(pair[along]))
+        if length >= 1.0 and abs(float(axis @ pair[along])) < np.cos(np.radians(AXES_AGREEMENT_DEG)) * length:
+            hints[index] = pair[along] / length  # its longest direction runs across the finger, or along a diagonal
+    return hints
+
+
+END_TANGENT = 0.5
+""":func:`_end_to_end`: an outline point belongs to an end when its tangent runs within 30 degrees of across the
+direction (the cosine between them below this)."""
+
+
+def _outline(mask: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The outer outline of a mask's largest piece, ``[K, 2]`` (u, v) about ``centre``, and its unit tangents (over
+    a hundredth of its length either way, three pixels at least)."""
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    points = max(contours, key=len)[:, 0, :].astype(np.float64)
+    step = max(3, len(points) // 100)
+    tangent = np.roll(points, -step, axis=0) - np.roll(points, step, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    return points - centre, tangent
+
+
+def _end_to_end(points: np.ndarray, tangents: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """From the middle of a mask's end toward ``-direction`` to the middle of its end toward ``direction``: each end the
+    outline points on its side whose tangent runs across ``direction`` (:data:`END_TANGENT`), so a straight cut is
+    one whatever its skew, and the line between them is the finger's axis as the frame's two cuts give it
+    (:func:`finger_axis`). Zero when either end has no such point."""
+    across = np.abs(tangents @ direction) < END_TANGENT
+    s = points @ direction
+    low, high = across & (s < 0), across & (s > 0)
+    if not (low.any() and high.any()):
+        return np.zeros(2)
+    return points[high].mean(0) - points[low].mean(0)
 
 
 def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float) -> Sections:
@@ -234,7 +345,8 @@ def _taper(sections: Sections) -> float:
     return float(-slope * count / max(float(np.median(width)), 1e-9))
 
 
-def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarray | None = None) -> SilhouetteFrame:
+def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarray | None = None,
+                     hint: np.ndarray | None = None) -> SilhouetteFrame:
     """The axis frame and chord sections of a finger mask (see the module docstring).
 
     The tip is the end of the silhouette whose last stations do not touch the image border. When
@@ -243,12 +355,13 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
     (a distal phalanx tapers by ~20 % to its tip). The axis points to the tip (increasing ``s``). The
     sign of the axis fixes the sign of ``normal``, so two views of one finger from cameras turned
     about it get frames that agree: their surface angles (:mod:`fingersplat3d.align.correspond.chart`)
-    differ by the turn.
+    differ by the turn. ``hint``: the axis of an outline the frame does not cut, from the capture's views
+    (:func:`capture_axes`).
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = finger_axis(mask)
+    axis, origin = finger_axis(mask, hint)
     on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
 
     def chords(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, Sections]:
@@ -283,9 +396,10 @@ def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Silh
     the views that show it; when none does (a capture of crops cut at both ends), the way the views'
     tapers agree on, each weighted by how clearly it tapers. Cameras turned about a finger see its
     axis the same way round, and one view's taper can be lost in the noise of its outline where the
-    capture's is not.
+    capture's is not. Outlines the frame does not cut take the axis the views agree on (:func:`capture_axes`).
     """
-    frames = [silhouette_frame(mask, smoothing) for mask in masks]
+    hints = capture_axes(masks)
+    frames = [silhouette_frame(mask, smoothing, hint=hint) for mask, hint in zip(masks, hints)]
     seen = [frame for frame in frames if frame.tip_found]
     if len(seen) == len(frames):
         return frames
@@ -293,9 +407,9 @@ def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Silh
     if float(np.linalg.norm(toward)) < 1e-9:
         return frames
     oriented = []
-    for mask, frame in zip(masks, frames):
+    for mask, frame, hint in zip(masks, frames, hints):
         if frame.tip_found or (not seen and float(np.dot(frame.axis, toward)) > 0.0):
             oriented.append(frame)  # its own outline or its own taper already agrees
         else:
-            oriented.append(silhouette_frame(mask, smoothing, toward=toward))
+            oriented.append(silhouette_frame(mask, smoothing, toward=toward, hint=hint))
     return oriented
