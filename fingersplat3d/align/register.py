@@ -131,6 +131,11 @@ class RegistrationConfig:
     front-side pairs)."""
     undecided_margin: float = 1.5
     """How many times better than any peak turning the view elsewhere the placing peak must agree."""
+    undecided_zooms: tuple[float, ...] = (1.25, 0.8, 1.5, 2.0 / 3.0)
+    """Besides its peaks, such a view is tried with its texture unwrapped at these scales against the placed view's
+    (a photo taken nearer or farther than the others: from a quarter larger or smaller the vote's patches no longer
+    correlate), each scale's decisive vote tried alike (``pairs[].placed_at_zoom`` in the report). () turns this
+    off. Measured on synthetic uwa captures with one photo enlarged or shrunk (docs/measurements.md)."""
     redraw_tolerance: float = 0.05
     """With a ``redraw`` callable, the pointmaps are drawn again when the fitted focal is further than this share
     from the one they were drawn with (closer, the perspective barely changes the relief)."""
@@ -206,11 +211,12 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
     return _chart_guess(prepared, a, b, charts, shift, config)
 
 
-def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: RegistrationConfig) -> GuidedMatches:
-    """A pair's first-guess matches: predicted through both charts shifted by ``shift``, searched ``first_search``
-    ridge periods around."""
-    return match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift), prepared.period,
-                        config.first_search * prepared.period)
+def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: RegistrationConfig,
+                 zoom: float = 1.0) -> GuidedMatches:
+    """A pair's first-guess matches: predicted through both charts shifted by ``shift`` (b seen ``zoom`` times as
+    large), searched ``first_search`` ridge periods around."""
+    return match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift, zoom),
+                        prepared.period, config.first_search * prepared.period)
 
 
 def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: int,
@@ -332,8 +338,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     align = (partial(global_align, uncertainty=False) if rig is None else
              (lambda d, f, c, cfg, previous=None, min_turns=None: rig_align(d, f, c, cfg, rig, sizes, previous)))
     alignment = align(depths, focals, registered, config.global_align)
-    if config.undecided_peaks > 0 and config.matcher == "surface" and rig is None and not all(alignment.aligned):
-        say("undecided votes: their peaks through the model")
+    if ((config.undecided_peaks > 0 or config.undecided_zooms) and config.matcher == "surface" and rig is None
+            and not all(alignment.aligned)):
+        say("undecided votes: their peaks and other zooms through the model")
         alignment = _placed_by_agreement(alignment, registered, pairs, records, prepared, charts, unwrapped, pointmaps,
                                          align, config, rng)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
@@ -405,7 +412,7 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
                          rng) -> GlobalAlignment:
     """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
-    (``RegistrationConfig.undecided_peaks``); ``registered`` grows by the pairs that place them."""
+    (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``); ``registered`` grows by the pairs that place them."""
     import torch
 
     from ..rotations import rotation_angle
@@ -424,15 +431,17 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                 a, b = pair
                 record = records[pair]
                 other = a if b == view else b if a == view else None
-                if other is None or not alignment.aligned[other] or record["ok"] or "turn_ratio" not in record or pair in done:
+                if other is None or not alignment.aligned[other] or record["ok"] or pair in done:
                     continue
                 done.add(pair)
-                for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], period, config.undecided_peaks):
+                for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, "turn_ratio" in record):
                     entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
+                    if zoom != 1.0:
+                        entry["zoom"] = round(zoom, 3)
                     record.setdefault("undecided_peaks", []).append(entry)
                     if shift.support < MIN_SUPPORT:
                         continue
-                    verified = _verified(_chart_guess(prepared, a, b, charts, shift, config), period, config)
+                    verified = _verified(_chart_guess(prepared, a, b, charts, shift, config, zoom), period, config)
                     entry["matches"] = len(verified)
                     if len(verified) < config.min_matches:
                         continue
@@ -444,7 +453,7 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                         continue
                     _, _, agreement = _through_model(prepared, trial, a, b, config)
                     entry["agreement"] = round(agreement, 3)
-                    tried.append((agreement, pair, first, trial))
+                    tried.append((agreement, pair, first, trial, zoom))
             if not tried:
                 continue
             tried.sort(key=lambda t: -t[0])
@@ -456,15 +465,33 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
             def turn(trial: GlobalAlignment) -> torch.Tensor:
                 return torch.as_tensor(trial.world_to_cam[view][:3, :3] @ trial.world_to_cam[anchor][:3, :3].T)
 
-            runner_up = max((agreement for agreement, _, _, trial in tried[1:]
+            runner_up = max((agreement for agreement, _, _, trial, _ in tried[1:]
                              if float(torch.rad2deg(rotation_angle(turn(trial), turn(best[3])))) > RIVAL_TURN_DEG),
                             default=0.0)
             if best[0] >= config.undecided_agreement and best[0] >= config.undecided_margin * runner_up:
                 registered.append(best[2])
                 alignment = best[3]
                 records[best[1]].update(ok=True, reason="", placed_by_agreement=round(best[0], 3))
+                if best[4] != 1.0:
+                    records[best[1]]["placed_at_zoom"] = round(best[4], 3)
                 placing = True
     return alignment
+
+
+def _candidate_shifts(a: int, b: int, prepared: _Prepared, charts, unwrapped, config: RegistrationConfig,
+                      voted: bool) -> list[tuple]:
+    """``(shift, zoom)`` to try for a pair no decisive vote registered: the ``undecided_peaks`` best peaks of its vote
+    (where it voted at all), then, for each of ``undecided_zooms``, b's texture unwrapped at that many times a's step
+    (a photo taken nearer or farther, or zoomed: its ridges a quarter or half again as large or small, which
+    decorrelates the vote's patches) and the vote's best peak where it is decisive."""
+    found = ([(shift, 1.0) for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], prepared.period,
+                                                                config.undecided_peaks)] if voted else [])
+    for zoom in config.undecided_zooms:
+        scaled = charts[b].unwrap(prepared.textures[b], prepared.masks[b], unwrapped[b].step * zoom)
+        shift = estimate_chart_shift(unwrapped[a], scaled, prepared.period)
+        if shift is not None and shift.decisive:
+            found.append((shift, float(zoom)))
+    return found
 
 
 def _still_reached(alignment: GlobalAlignment, holding: list[PairCorrespondences]) -> GlobalAlignment:

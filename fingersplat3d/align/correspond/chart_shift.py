@@ -148,14 +148,16 @@ def chart_shift_candidates(a: Unwrapped, b: Unwrapped, period: float, count: int
 
 @dataclass(frozen=True, eq=False)
 class ChartPredictor:
-    """Pixels of view a to view b through both charts and a :class:`ChartShift`."""
+    """Pixels of view a to view b through both charts and a :class:`ChartShift`; ``zoom``: b's pixels per a's along
+    the finger, when b's texture was unwrapped at ``zoom`` times a's step (``sigma_b = zoom * (sigma_a + d_sigma)``)."""
 
     chart_a: CylinderChart
     chart_b: CylinderChart
     shift: ChartShift
+    zoom: float = 1.0
 
     def __call__(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Predicted pixels in b ``[N, 2]`` and whether b sees them ``[N]``."""
         sigma, theta = self.chart_a.surface(uv)
         theta_b = theta + self.shift.turn
-        return self.chart_b.pixels(sigma + self.shift.d_sigma, theta_b), np.abs(theta_b) < MAX_CHART_ANGLE
+        return self.chart_b.pixels(self.zoom * (sigma + self.shift.d_sigma), theta_b), np.abs(theta_b) < MAX_CHART_ANGLE
