@@ -76,10 +76,14 @@ class FuseConfig:
     are made with it and the alignment keeps it instead of fitting one. Two views cannot fix the focal themselves
     (their optical axes meet at the finger), and their turn follows it: on the real dev captures two views alone
     turned 14-16 degrees off with the focal fitted, 1-5 with it given (docs/measurements.md, real captures)."""
+    view_focals_px: tuple[float, ...] | None = None
+    """Each view's focal in its photo's pixels, when known view by view and not alike (photos whose EXIF records other
+    zooms): the pointmaps are made with them and the alignment keeps each. ``focal_px`` takes precedence."""
     exif_focal: bool = True
     """Take the focal the photos' EXIF records (:mod:`~fingersplat3d.io.exif`: phones and cameras write it) as
-    known, like ``focal_px``, when every view has one and they agree within :data:`EXIF_FOCAL_AGREEMENT` (one camera,
-    one zoom), the ``prior`` backend is used, and neither ``focal_px`` nor a rig gives the focal."""
+    known, like ``focal_px``, when every view has one, the ``prior`` backend is used, and neither ``focal_px`` nor a
+    rig gives the focal: one for all when they agree within :data:`EXIF_FOCAL_AGREEMENT` (one camera, one zoom), else
+    each view its own (``view_focals_px``: another zoom, another phone)."""
     px_per_mm: float | None = None
     """Metric hint: image pixels per millimetre at the finger (first view)."""
     finger_width_mm: float | None = None
@@ -147,7 +151,11 @@ def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
     weighs its matches against its priors alike at any resolution. Photos used as they are keep it."""
     if config.focal_px is not None:  # a known focal: in working pixels, and held
         align = replace(config.registration.global_align, optimize_focal=False)
-        config = replace(config, focal_px=config.focal_px * scale.factor,
+        config = replace(config, focal_px=config.focal_px * scale.factor, view_focals_px=None,
+                         registration=replace(config.registration, global_align=align))
+    elif config.view_focals_px is not None:  # each view's own: in working pixels, each held
+        align = replace(config.registration.global_align, optimize_focal=False, shared_focal=False)
+        config = replace(config, view_focals_px=tuple(f * scale.factor for f in config.view_focals_px),
                          registration=replace(config.registration, global_align=align))
     if scale.factor == 1.0:
         return config
@@ -190,6 +198,8 @@ def _backend(config: FuseConfig):
         raise InputError(f"a checkpoint is only used by the dust3r backend, not by {config.backend!r}")
     if config.focal_px is not None:
         return get_backend(config.backend, focal_px=config.focal_px)
+    if config.view_focals_px is not None:
+        return get_backend(config.backend, view_focals_px=tuple(config.view_focals_px))
     return get_backend(config.backend)
 
 
@@ -233,9 +243,11 @@ def _with_exif_focal(capture: Capture, config: FuseConfig, rig: Rig | None, repo
     if why_not:
         record["why_not"] = why_not
         return config
-    if max(values) > (1.0 + EXIF_FOCAL_AGREEMENT) * min(values):
-        record["why_not"] = f"the views' EXIF focal lengths differ ({min(values):.0f}-{max(values):.0f} px: another zoom)"
-        return config
+    if max(values) > (1.0 + EXIF_FOCAL_AGREEMENT) * min(values):  # another zoom or another camera: each its own
+        record.update(used=True, focals_px={name: float(value) for name, value in zip(capture.names, values)},
+                      per_view=f"the views' EXIF focal lengths differ ({min(values):.0f}-{max(values):.0f} px: another "
+                               "zoom): each view keeps its own")
+        return replace(config, view_focals_px=tuple(float(value) for value in values))
     focal = float(np.median(values))
     record.update(used=True, focal_px=focal)
     return replace(config, focal_px=focal)
@@ -244,8 +256,8 @@ def _with_exif_focal(capture: Capture, config: FuseConfig, rig: Rig | None, repo
 def _redraw(capture: Capture, config: FuseConfig):
     """The views' pointmaps drawn through a given focal, where the backend draws them through a guessed one (the
     prior without ``--focal-px``), for :func:`~fingersplat3d.align.register.register_views`; else None."""
-    if config.focal_px is not None or config.backend != "prior":  # a learned backend's pointmaps come with its focal
-        return None
+    if config.focal_px is not None or config.view_focals_px is not None or config.backend != "prior":
+        return None  # a known focal is kept; a learned backend's pointmaps come with its focal
     backend = _backend(config)
     return lambda focal: replace(backend, focal_px=float(focal)).predict_views(capture.views)
 
@@ -351,7 +363,9 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
         status["turn_uncertainty_deg"] = _per_pair(names, alignment.turn_uncertainty_deg, 3)
         loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
         if loose:
-            focal_fitted = sum(alignment.aligned) == 2 and report.get("settings", {}).get("focal_px") is None
+            settings = report.get("settings", {})
+            focal_fitted = (sum(alignment.aligned) == 2 and settings.get("focal_px") is None
+                            and settings.get("view_focals_px") is None and not report.get("exif_focal", {}).get("used"))
             _warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
                   + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
                   "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"

@@ -6,6 +6,7 @@ import pytest
 
 from fingersplat3d.pointmaps import Pointmap, PointmapBackend, get_backend
 from fingersplat3d.pointmaps.prior import PriorBackend, finger_height, height_to_points
+from fingersplat3d.errors import InputError
 from fingersplat3d.scene import View
 
 from test_segment import raises_naming, synthetic_views
@@ -90,6 +91,18 @@ def test_ratio_scales_and_perspective_converges_to_orthographic():
     np.testing.assert_allclose(far, ortho, atol=1e-3)
     near = finger_height(mask, 1.0, 0.15, focal=400.0).height
     assert np.isfinite(near).all() and (near[mask] >= 0).all() and (near[~mask] == 0).all()
+
+
+def test_each_view_can_have_its_own_known_focal():
+    mask = capsule()
+    views = [View("a", mask * 0.7, mask=mask), View("b", mask * 0.7, mask=mask)]
+    pointmaps = PriorBackend(focal_px=300.0, view_focals_px=(400.0, 500.0)).predict_views(views)
+    assert [pm.focal for pm in pointmaps] == [400.0, 500.0]  # each its own, before the shared one
+    for bad in ((400.0, float("nan")), (400.0, -1.0), ("400", 500.0)):
+        with pytest.raises(InputError, match="view_focals_px"):
+            PriorBackend(view_focals_px=bad)
+    with pytest.raises(InputError, match="view focals"):
+        PriorBackend(view_focals_px=(400.0,)).predict_views(views)
 
 
 def test_points_follow_the_pinhole():

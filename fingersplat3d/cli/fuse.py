@@ -59,7 +59,8 @@ def add(commands) -> None:
                            "views cannot fix it, and their turn follows it; see docs/measurements.md)")
     fuse.add_argument("--no-exif-focal", dest="exif_focal", action="store_false",
                       help="fit the focal even when the photos' EXIF records one (by default a focal every photo's EXIF "
-                           "agrees on is kept, as --focal-px; report.json exif_focal says what was found)")
+                           "agrees on is kept, as --focal-px, and photos of other zooms keep each its own; report.json "
+                           "exif_focal says what was found)")
     fuse.add_argument("--rig", type=Path, help="rig.json from 'fs3d rig calibrate': keep its camera poses and focal fixed "
                                                "(the views are its cameras in order)")
     fuse.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -97,8 +98,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {args.output}: {len(result.capture)} views, {result.report['points']} points, units {result.units}, "
           f"{residual}, {time.perf_counter() - start:.1f} s")
     exif = result.report.get("exif_focal", {})
-    if exif.get("used"):
+    if exif.get("used") and exif.get("focal_px") is not None:
         print(f"  focal {exif['focal_px']:.0f} px from the photos' EXIF, kept (--no-exif-focal fits it)")
+    elif exif.get("used"):
+        focals = ", ".join(f"{name} {value:.0f}" for name, value in exif["focals_px"].items())
+        print(f"  focals from the photos' EXIF, another zoom in each, kept (px: {focals}; --no-exif-focal fits one)")
     if "splat" in result.report:
         splat = result.report["splat"]
         psnr = ", ".join(f"{name} {value:.1f}" for name, value in splat["psnr_in_mask_db"].items())

@@ -89,12 +89,19 @@ class PriorBackend:
 
     focal_px: float | None = None
     """The cameras' focal length in pixels when it is known (``fs3d fuse --focal-px``); it replaces the guess."""
+    view_focals_px: tuple[float, ...] | None = None
+    """Each view's focal length in its pixels, when known view by view (photos taken at other zooms, whose EXIF
+    records each); it replaces ``focal_px`` and the guess."""
 
     def __post_init__(self) -> None:
         checks = (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
                   ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))
         if self.focal_px is not None:
             checks += (("focal_px", 0.0, math.inf, False),)
+        if self.view_focals_px is not None and not all(
+                isinstance(f, numbers.Real) and not isinstance(f, bool) and math.isfinite(f) and f > 0
+                for f in self.view_focals_px):
+            raise InputError(f"prior backend: view_focals_px must be positive finite numbers, got {self.view_focals_px!r}")
         for field_name, low, high, low_allowed in checks:
             value = getattr(self, field_name)
             # a number, not text that reads as one ("3" would repeat a string where the focal multiplies)
@@ -119,7 +126,12 @@ class PriorBackend:
         return view.mask
 
     def _predict(self, index: int, view: View, mask: np.ndarray, hint: np.ndarray | None) -> Pointmap:
-        focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
+        if self.view_focals_px is not None:
+            if index >= len(self.view_focals_px):
+                raise InputError(f"prior backend: {len(self.view_focals_px)} view focals for view {index + 1}")
+            focal = float(self.view_focals_px[index])
+        else:
+            focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
                                focal if self.perspective else None, hint)
         points = height_to_points(relief.height, mask, focal)
