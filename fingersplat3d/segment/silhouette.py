@@ -5,7 +5,8 @@ straight axis, shrinking over the fingertip cap. Its silhouette is described by
 
 * the axis: the line between the frame's two cuts on a crop cut at both ends, else the principal
   direction of the mask pixels (:func:`finger_axis`: a crop shorter along the finger than across it
-  keeps its axis), oriented toward the
+  keeps its axis), or on crops cut inside the frame the way along which the capture's views agree in
+  length (:func:`capture_axes`), oriented toward the
   fingertip (the end of the silhouette that the image border does not cut; on a crop cut at both
   ends, the end the finger narrows toward, agreed over all views of a capture; see
   :func:`silhouette_frame` and :func:`orient_frames`);
@@ -134,9 +135,9 @@ AXES_AGREEMENT_DEG = 20.0
 """:func:`capture_axes`: the uncut views' outlines must run one way within this (up to a quarter turn), as cameras
 turned about a finger, or a finger rolled before one camera, see its axis one way in every view."""
 EXTENT_STEADINESS = 2.0
-""":func:`capture_axes`: the extents along the axis taken vary this many times less over the views than across it."""
+""":func:`capture_axes`: the views' lengths along the axis taken vary this many times less than across it."""
 MIN_EXTENT_SPREAD = 0.02
-""":func:`capture_axes`: the least spread (standard deviation of the log extents) of the varying direction: below it
+""":func:`capture_axes`: the least spread (standard deviation of the log lengths) of the varying direction: below it
 the views' outlines say nothing (a round section, views seen alike)."""
 
 
