@@ -391,7 +391,8 @@ def test_one_view_says_there_is_nothing_to_align(two_fingers, tmp_path, capsys):
 
 @pytest.mark.parametrize("option, value", [("--polish-iterations", "-5"), ("--guided-rounds", "1.5"),
                                            ("--splat-iterations", "-1"), ("--px-per-mm", "nan"),
-                                           ("--finger-width-mm", "-3"), ("--pair-batch", "0")])
+                                           ("--finger-width-mm", "-3"), ("--pair-batch", "0"), ("--px-per-mm", "1e-9"),
+                                           ("--finger-width-mm", "500")])
 def test_numeric_options_are_range_checked_in_one_sentence(two_fingers, tmp_path, capsys, option, value):
     from fingersplat3d.cli import main
 

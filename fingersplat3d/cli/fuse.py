@@ -11,7 +11,7 @@ from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
 from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, ridge_px, splat_config
-from .types import COUNT, POSITIVE, STEPS
+from .types import COUNT, FINGER_MM, POSITIVE, PX_PER_MM, STEPS
 
 __all__ = ["add", "run"]
 
@@ -40,8 +40,8 @@ def add(commands) -> None:
     fuse.add_argument("--pair-batch", type=COUNT, default=4, help="dust3r backend: image pairs per network batch (default 4)")
     add_registration_arguments(fuse)
     hint = fuse.add_mutually_exclusive_group()
-    hint.add_argument("--px-per-mm", type=POSITIVE, help="metric hint: pixels per millimetre at the finger")
-    hint.add_argument("--finger-width-mm", type=POSITIVE, help="metric hint: the finger's width in millimetres")
+    hint.add_argument("--px-per-mm", type=PX_PER_MM, help="metric hint: pixels per millimetre at the finger")
+    hint.add_argument("--finger-width-mm", type=FINGER_MM, help="metric hint: the finger's width in millimetres")
     fuse.add_argument("--mesh", action="store_true", help="also write mesh.ply (Poisson, cleaned)")
     add_splat_arguments(fuse)
     fuse.add_argument("--icp", action="store_true",

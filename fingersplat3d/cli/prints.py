@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import EXIT_INCOMPLETE
 from ..prints.learned import ENHANCERS
-from .types import number
+from .types import PX_PER_MM, number
 
 __all__ = ["add", "run"]
 
@@ -23,7 +23,7 @@ def add(commands) -> None:
                     "its source) and OUT/prints.csv. Exit status 4 when some inputs gave no print (listed in prints.csv).")
     prints.add_argument("inputs", nargs="+", type=Path, help="reconstruction folders and/or image files")
     prints.add_argument("-o", "--output", type=Path, required=True, help="folder for the prints")
-    prints.add_argument("--px-per-mm", type=number(float, 0.5, 500.0),
+    prints.add_argument("--px-per-mm", type=PX_PER_MM,
                         help="the photos' pixels per mm at the finger, to scale a reconstruction made in arbitrary units "
                              "(default: the model's own scale when in mm, else the ridge period: 9 px at 500 ppi)")
     prints.add_argument("--ppi", type=number(float, 100.0, 2000.0), default=500.0, help="print resolution (default 500)")
