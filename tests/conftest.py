@@ -17,11 +17,19 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # each of pytest -n N's workers gets 
 from fingersplat3d.synth import SynthConfig, synthesize
 
 REAL_DEV = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
+IMPOSE_DEV = Path(__file__).resolve().parents[2] / "shared" / "data" / "impose-dev"
 
 
 @pytest.fixture(scope="session")
 def uwa640():
     return synthesize(1, SynthConfig(size=(640, 512))).capture
+
+
+@pytest.fixture(scope="session")
+def impose_dev() -> Path:
+    if not IMPOSE_DEV.is_dir():
+        pytest.skip(f"another group's renders are not at {IMPOSE_DEV} (they are read at run time, never shipped)")
+    return IMPOSE_DEV
 
 
 @pytest.fixture(scope="session")
