@@ -400,10 +400,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     if rig is None and config.global_align.solver == "lm":
         alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
                                                                                 config.global_align, solved_with[1]))
-    if rig is None and config.global_align.solver == "lm" and sum(alignment.aligned) >= 2:
-        say("how sure: probing the focal")
-        alignment = replace(alignment, turn_sensitivity_deg=turn_sensitivity_deg(alignment, depths, focals, solved_with[0],
-                                                                               config.global_align, solved_with[1]))
+        if sum(alignment.aligned) >= 2:
+            say("how sure: probing the focal")
+            alignment = replace(alignment, turn_sensitivity_deg=turn_sensitivity_deg(alignment, depths, focals, solved_with[0],
+                                                                                   config.global_align, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric,
                         list(pointmaps), redrawn_at)
 
@@ -426,7 +426,7 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
         for view in range(len(alignment.aligned)):
             if alignment.aligned[view]:
                 continue
-            tried = []  # (agreement, pair, first-guess correspondences, trial alignment)
+            tried = []  # (agreement, pair, first-guess correspondences, trial alignment, zoom)
             for pair in pairs:
                 a, b = pair
                 record = records[pair]

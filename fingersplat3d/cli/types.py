@@ -39,11 +39,11 @@ COUNT = number(int, 1)
 STEPS = number(int, 0, 1_000_000)
 POSITIVE = number(float, 0.0, 1e6, low_inclusive=False)
 SEED = number(int, 0)
+"""Random seeds: numpy's generators take non-negative integers."""
 PX_PER_MM = number(float, 0.5, 500.0)
 """Photo pixels per millimetre at the finger: a distant phone photo's few to a microscope's hundreds."""
 FINGER_MM = number(float, 3.0, 60.0)
 """A finger's width in millimetres: a child's little finger to a large thumb, with room either side."""
-"""Random seeds: numpy's generators take non-negative integers."""
 
 
 def angle_list(text: str) -> tuple[float, ...]:

@@ -94,16 +94,14 @@ class PriorBackend:
     records each); it replaces ``focal_px`` and the guess."""
 
     def __post_init__(self) -> None:
-        checks = (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
-                  ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))
+        checks = [(name, getattr(self, name), low, high, low_allowed) for name, low, high, low_allowed in
+                  (("focal_factor", 0.0, math.inf, False), ("depth_ratio", 0.0, math.inf, True),
+                   ("smoothing", 0.0, math.inf, True), ("confidence_knee", 0.0, 1.0, False))]
         if self.focal_px is not None:
-            checks += (("focal_px", 0.0, math.inf, False),)
-        if self.view_focals_px is not None and not all(
-                isinstance(f, numbers.Real) and not isinstance(f, bool) and math.isfinite(f) and f > 0
-                for f in self.view_focals_px):
-            raise InputError(f"prior backend: view_focals_px must be positive finite numbers, got {self.view_focals_px!r}")
-        for field_name, low, high, low_allowed in checks:
-            value = getattr(self, field_name)
+            checks.append(("focal_px", self.focal_px, 0.0, math.inf, False))
+        if self.view_focals_px is not None:
+            checks += [(f"view_focals_px[{i}]", f, 0.0, math.inf, False) for i, f in enumerate(self.view_focals_px)]
+        for field_name, value, low, high, low_allowed in checks:
             # a number, not text that reads as one ("3" would repeat a string where the focal multiplies)
             number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
             if not (math.isfinite(number) and (number >= low if low_allowed else number > low) and number <= high):
