@@ -3,6 +3,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from fingersplat3d.cli import main
@@ -83,3 +84,18 @@ def test_pure_modules_do_not_import_open3d():
     code = ("import sys, fingersplat3d.scene, fingersplat3d.synth.ridges, fingersplat3d.synth.shape, "
             "fingersplat3d.io.images; assert 'open3d' not in sys.modules and 'torch' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_info_names_every_unreadable_image(tmp_path, capsys):
+    """Reading stops at the first broken file; info then names each of them in its one sentence."""
+    from fingersplat3d.io.images import write_image
+
+    write_image(tmp_path / "good.png", np.full((40, 60), 0.5, np.float32))
+    for name in ("broken_a.png", "broken_b.jpg"):
+        (tmp_path / name).write_bytes(b"not an image")
+    assert main(["info", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "2 of 3 images" in err and "broken_a.png" in err and "broken_b.jpg" in err and "\n" not in err
+    assert main(["info", str(tmp_path / "good.png"), str(tmp_path / "broken_a.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "broken_a.png" in err and "of 2 images" not in err and "\n" not in err

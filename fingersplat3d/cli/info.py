@@ -27,6 +27,30 @@ def describe(capture) -> dict:
     return {"views": views, **{k: capture.metadata[k] for k in keys if k in capture.metadata}}
 
 
+def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
+    """When more than one of the images ``paths`` names (files, or the images of folders, as ``load_any`` takes them)
+    cannot be read, an ``InputError`` naming each (``named`` of them at most): reading stops at the first, and a user
+    checking a dataset wants to know all. Returns when at most one is unreadable (the caller's error says which)."""
+    from ..errors import InputError
+    from ..io.images import IMAGE_SUFFIXES, read_image
+
+    files = []
+    for path in paths:
+        if path.is_dir():
+            files += sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+        elif path.is_file():
+            files.append(path)
+    problems = []
+    for file in files:
+        try:
+            read_image(file)
+        except InputError as error:
+            problems.append(str(error))
+    if len(problems) > 1:
+        more = f"; and {len(problems) - named} more" if len(problems) > named else ""
+        raise InputError(f"{len(problems)} of {len(files)} images cannot be read: " + "; ".join(problems[:named]) + more)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..io.capture import capture_files, is_capture_folder, read_capture
     from ..io.minutiae import read_minutiae
@@ -42,9 +66,15 @@ def run(args: argparse.Namespace) -> int:
             report["visible_minutiae"] = {k: sum(e["visible"] for e in v) for k, v in minutiae.get("views", {}).items()}
         captures = [report]
     else:
+        from ..errors import InputError
         from ..io.datasets import load_any
 
-        captures = [{"kind": "dataset capture", **describe(c)} for c in load_any(paths)]
+        try:
+            loaded = load_any(paths)
+        except InputError:
+            _name_every_unreadable(paths)
+            raise
+        captures = [{"kind": "dataset capture", **describe(c)} for c in loaded]
     if args.json:
         print(json.dumps(captures, indent=2))
     else:
