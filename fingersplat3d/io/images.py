@@ -42,7 +42,33 @@ def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
     raw = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if upright else cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
         raise input_error(path, "not a readable image (corrupt or unsupported format)")
+    if path.suffix.lower() in (".jpg", ".jpeg") and _jpeg_truncated(path.read_bytes()):
+        raise input_error(path, "truncated JPEG: the file ends inside its image data (an interrupted copy or download?)")
     return raw
+
+
+def _jpeg_truncated(data: bytes) -> bool:
+    """True when a JPEG's image data is not closed by an end-of-image marker: the file stops inside it. OpenCV then
+    fills the missing rows grey and says so only on stderr. The marker segments are walked from the start to the main
+    image's first scan (an EXIF thumbnail inside APP1 is skipped whole), and an end-of-image marker must follow it
+    (inside scan data 0xFF is always escaped, so only a marker reads 0xFFD9; data a camera appends after the image, a
+    second picture included, comes after its end marker). Anything the walk cannot read is left to the decoder."""
+    if data[:2] != b"\xff\xd8":
+        return False
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return False
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte before a marker
+            i += 1
+        elif marker == 0xDA:  # start of scan: entropy-coded data follows
+            return data.find(b"\xff\xd9", i) < 0
+        elif marker == 0x01 or 0xD0 <= marker <= 0xD8:  # markers without a length
+            i += 2
+        else:
+            i += 2 + int.from_bytes(data[i + 2:i + 4], "big")
+    return False
 
 
 def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
