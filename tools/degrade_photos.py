@@ -1,0 +1,58 @@
+"""Degraded copies of a folder of photos, for registration under worse light, noise and size than the dev captures.
+
+    python3 tools/degrade_photos.py SRC OUT --kind noise|small|dark [--seed 0]
+    python3 tools/bench_real.py --data OUT
+
+Every image of SRC (its own files, sorted) is written to OUT under its own name: ``noise`` adds Gaussian noise of
+sigma 8 grey levels and saves at JPEG quality 60; ``small`` shrinks to 0.6x (area filter, JPEG 95); ``dark`` keeps
+0.3x the light with noise of sigma 3 (JPEG 90). Noise draws from ``numpy.random.default_rng(seed)`` in file order.
+The measured rows are in docs/measurements.md (the same captures mirrored, turned or degraded).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
+
+
+def degrade(image: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """The degraded 8-bit image and the JPEG quality to save it at."""
+    pixels = image.astype(np.float32)
+    if kind == "noise":
+        return np.clip(pixels + rng.normal(0, 8, pixels.shape), 0, 255).astype(np.uint8), 60
+    if kind == "small":
+        return np.clip(cv2.resize(pixels, None, fx=0.6, fy=0.6, interpolation=cv2.INTER_AREA), 0, 255).astype(np.uint8), 95
+    return np.clip(pixels * 0.3 + rng.normal(0, 3, pixels.shape), 0, 255).astype(np.uint8), 90
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("src", type=Path)
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--kind", choices=("noise", "small", "dark"), required=True)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    files = sorted(p for p in args.src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if args.src.is_dir() else []
+    if not files:
+        print(f"degrade_photos: {args.src}: no images", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(args.seed)
+    for path in files:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            print(f"degrade_photos: {path}: not a readable image", file=sys.stderr)
+            return 2
+        degraded, quality = degrade(image, args.kind, rng)
+        cv2.imwrite(str(args.out / (path.stem + ".jpg")), degraded, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    print(f"wrote {len(files)} images to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
