@@ -25,15 +25,38 @@ def test_environment_setting_wins_and_is_checked(monkeypatch):
 
 def test_use_threads_sets_torch_and_the_kernels_threads(monkeypatch):
     import torch
+    from threadpoolctl import threadpool_info, threadpool_limits
 
     from fingersplat3d.device import use_threads
     from fingersplat3d.splat.cpu_raster import kernel_threads
 
     monkeypatch.setenv("FS3D_THREADS", "2")  # restored (removed) after the test
     before = torch.get_num_threads()
+    blas_before = {pool["prefix"]: pool["num_threads"] for pool in threadpool_info()}
     try:
         use_threads(1)
         assert os.environ["FS3D_THREADS"] == "1" and torch.get_num_threads() == 1
         assert cpu_threads() == 1 and kernel_threads() == 1
+        assert all(pool["num_threads"] == 1 for pool in threadpool_info() if pool["user_api"] == "blas")  # numpy's, scipy's
     finally:
         torch.set_num_threads(before)
+        threadpool_limits(limits=blas_before)
+
+
+def test_single_threaded_holds_torch_opencv_and_blas_to_one_thread_and_restores_them():
+    """Many small solves beside a busy process: BLAS threads spin on the cores it needs (a registration took 4.4x as
+    long); inside ``single_threaded`` every pool runs one thread, and after it each has its own count back."""
+    import cv2
+    import numpy as np  # noqa: F401  (loads numpy's BLAS, so that threadpoolctl sees it)
+    import scipy.linalg  # noqa: F401
+    import torch
+    from threadpoolctl import threadpool_info
+
+    from fingersplat3d.device import single_threaded
+
+    before = ({p["prefix"]: p["num_threads"] for p in threadpool_info()}, torch.get_num_threads(), cv2.getNumThreads())
+    with single_threaded():
+        assert threadpool_info() and all(pool["num_threads"] == 1 for pool in threadpool_info())
+        assert torch.get_num_threads() == 1 and cv2.getNumThreads() == 1
+    after = ({p["prefix"]: p["num_threads"] for p in threadpool_info()}, torch.get_num_threads(), cv2.getNumThreads())
+    assert after == before
