@@ -3,6 +3,7 @@ import itertools
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -143,6 +144,24 @@ def test_identical_views_are_monocular_mode(uwa):
     assert result.report["alignment"]["mode"] == "monocular"
     assert result.report["pairs"][0]["reason"].startswith("identical images")
     assert depth_errors(result.depths[0], view.depth, view.mask).mae < 0.6
+
+
+def test_a_photo_given_twice_re_encoded_is_monocular_mode_and_a_moved_one_is_not(uwa):
+    """A copy saved again as a JPEG, or with a little noise, is still one picture (no parallax to register); the same
+    photo moved by one pixel is another shot."""
+    from fingersplat3d.pipeline import _same_picture
+
+    image = uwa["center"].image
+    eight = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
+    again = cv2.imdecode(cv2.imencode(".jpg", eight, [cv2.IMWRITE_JPEG_QUALITY, 70])[1], cv2.IMREAD_UNCHANGED) / 255.0
+    noisy = image + np.random.default_rng(0).normal(0, 1.5 / 255, image.shape)
+    assert _same_picture(image, again.astype(np.float32)) and _same_picture(image, noisy)
+    assert not _same_picture(image, np.roll(image, 1, axis=1)) and not _same_picture(image, image[:-1])
+    assert not _same_picture(image, uwa["left"].image)
+    twins = Capture((View("a", image), View("b", again.astype(np.float32))))
+    result = fuse(twins, GEOMETRY)
+    assert result.report["alignment"]["mode"] == "monocular"
+    assert result.report["pairs"][0]["reason"].startswith("identical images")
 
 
 def test_two_views_90_degrees_apart_register_through_the_unwrapped_texture(uwa):
