@@ -22,7 +22,7 @@ from .align.register import RegistrationConfig, register_views
 from .align.solve.global_opt import GlobalAlignment, global_align
 from .align.solve.icp import ICPConfig, refine_poses
 from .align.solve.rig import Rig, RigCapture
-from .align.transfer import multi_view_support
+from .align.transfer import MIN_PARALLAX_DEG, multi_view_support
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
@@ -202,6 +202,10 @@ def _backend(config: FuseConfig):
         return get_backend(config.backend, view_focals_px=tuple(config.view_focals_px))
     return get_backend(config.backend)
 
+
+NO_PARALLAX_SHARE = 0.05
+"""Registered views of which none has this share of its surface seen by another from :data:`MIN_PARALLAX_DEG` away are
+warned about: their registration holds, their depth is the prior's."""
 
 SAME_PICTURE = 0.05
 """Two images of one size whose difference (RMS) is under this share of the first's own spread are the same picture:
@@ -591,6 +595,11 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
     finally:
         bar.close()  # before any message: an error is the last line the user sees
     support = multi_view_support(depths, cameras, [bool(a) for a in alignment.aligned])
+    shares = [share for share in support if share is not None]
+    if len(shares) >= 2 and max(shares) < NO_PARALLAX_SHARE:
+        _warn(report, f"no two views see the finger from {MIN_PARALLAX_DEG:g}° or more apart (the same place, or the same "
+                      "photo moved): its depth is the pointmap's guess, as from one photo; take the photos from "
+                      "different angles around the finger")
     report["alignment"].update(
         backed_by_two_views={name: None if share is None else round(share, 3) for name, share in zip(capture.names, support)},
         residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d, focals_px=alignment.focals,

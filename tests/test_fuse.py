@@ -164,6 +164,17 @@ def test_a_photo_given_twice_re_encoded_is_monocular_mode_and_a_moved_one_is_not
     assert result.report["pairs"][0]["reason"].startswith("identical images")
 
 
+def test_the_same_photo_moved_registers_but_backs_no_depth(uwa):
+    """The same photo moved by a few pixels: another picture, registered at no turn, yet seen from one place: none of
+    its surface is backed by a second view, and the run says so."""
+    image = uwa["center"].image
+    moved = Capture((View("a", image), View("b", np.roll(image, 3, axis=1))))
+    result = fuse(moved, GEOMETRY)
+    assert result.report["alignment"]["mode"] != "monocular"
+    assert all(share == 0.0 for share in result.report["alignment"]["backed_by_two_views"].values())
+    assert any("from 5° or more apart" in warning for warning in result.report["warnings"])
+
+
 def test_two_views_90_degrees_apart_register_through_the_unwrapped_texture(uwa):
     # Keypoint matchers find nothing right here; the unwrapped ridge texture still overlaps.
     views = (uwa["left"].with_(camera=None, depth=None), uwa["right"].with_(camera=None, depth=None))

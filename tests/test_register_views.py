@@ -89,4 +89,7 @@ def test_multi_view_support_is_the_share_another_view_sees():
     assert shares[2] == 0.0  # c sees other ground
     assert multi_view_support([depth_a, depth_b], [cam_a, cam_b], [True, False], stride=1) == [0.0, None]
     shares = multi_view_support([depth_a, depth_a.copy()], [cam_a, cam_a], [True, True], stride=2)
-    assert shares == [1.0, 1.0]  # two photos of one skin: all of it seen twice
+    assert shares == [0.0, 0.0]  # two photos of one skin from one place: seen twice, its depth from neither
+    (cam_d, depth_d) = _plane_view(2.0)  # 2 px of the plane aside: rays 2.3 degrees apart at most
+    assert multi_view_support([depth_a, depth_d], [cam_a, cam_d], [True, True], stride=1) == [0.0, 0.0]
+    assert multi_view_support([depth_a, depth_d], [cam_a, cam_d], [True, True], stride=1, min_parallax_deg=1.0)[0] > 0.9
