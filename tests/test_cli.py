@@ -99,3 +99,37 @@ def test_info_names_every_unreadable_image(tmp_path, capsys):
     assert main(["info", str(tmp_path / "good.png"), str(tmp_path / "broken_a.png")]) == 2
     err = capsys.readouterr().err.strip()
     assert "broken_a.png" in err and "of 2 images" not in err and "\n" not in err
+
+
+def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
+    """A folder 'fs3d fuse' wrote: each view's registration and backing, each registered pair's turn from the
+    cameras with how sure the run was, and the run's warnings."""
+    from scipy.spatial.transform import Rotation
+
+    from fingersplat3d.io.cameras import write_cameras
+    from fingersplat3d.scene import Camera
+
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    poses = []
+    for degrees in (0.0, 30.0, 75.0):
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("y", degrees, degrees=True).as_matrix()
+        poses.append(pose)
+    write_cameras(rec / "cameras.json", [(name, f"{name}.png", Camera.from_focal(1500.0, 640, 512, pose))
+                                         for name, pose in zip(("a", "b", "c"), poses)])
+    report = {"version": "x", "points": 10, "warnings": ["something to know"],
+              "alignment": {"mode": "multi-view", "aligned": {"a": True, "b": True, "c": False}, "residual_px": 0.4,
+                            "backed_by_two_views": {"a": 0.9, "b": 0.8, "c": None},
+                            "turn_uncertainty_deg": {"a-b": 0.05}, "turn_sensitivity_deg": {"a-b": 0.7}}}
+    (rec / "report.json").write_text(json.dumps(report))
+    assert main(["info", str(rec), "--json"]) == 0
+    described = json.loads(capsys.readouterr().out)[0]
+    assert described["kind"] == "reconstruction folder" and described["registered"] == "2 of 3"
+    assert [p["pair"] for p in described["pairs"]] == ["a-b"]  # c is not registered
+    assert described["pairs"][0]["turn_deg"] == pytest.approx(30.0, abs=1e-6)
+    assert described["warnings"] == ["something to know"] and described["files"] == ["report.json"]
+    assert main(["info", str(rec)]) == 0
+    out = capsys.readouterr().out
+    assert "c: 640x512, focal 1500 px, not registered" in out and "turn a-b: 30.00°, ±0.05°" in out
+    assert "warning: something to know" in out

@@ -5,14 +5,21 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["add", "run", "describe"]
+import numpy as np
+
+__all__ = ["add", "run", "describe", "describe_reconstruction"]
+
+RECONSTRUCTION_FILES = ("fused.ply", "gaussians.ply", "mesh.ply", "depth", "report.json", "views")
 
 
 def add(commands) -> None:
     """``fs3d info``: its arguments."""
-    info = commands.add_parser("info", help="describe a capture folder or a dataset folder",
-                               description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds.")
-    info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder or image files")
+    info = commands.add_parser("info", help="describe a capture, dataset or reconstruction folder",
+                               description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds, "
+                                           "or what a reconstruction folder from 'fs3d fuse' says of its views: "
+                                           "registered or not, focal, the share of each view backed by a second one, "
+                                           "each pair's turn and how sure it is, the run's warnings.")
+    info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder, reconstruction folder or image files")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(run=run)
 
@@ -25,6 +32,64 @@ def describe(capture) -> dict:
              for v in capture.views]
     keys = ("dataset", "rig", "seed", "pattern_class", "ridge_period_mm", "units", "subject", "finger", "capture")
     return {"views": views, **{k: capture.metadata[k] for k in keys if k in capture.metadata}}
+
+
+def describe_reconstruction(folder: Path) -> dict:
+    """What a reconstruction folder says of itself: its cameras (``cameras.json``) and what its ``report.json``
+    recorded (registration, how sure, warnings), and which outputs it holds."""
+    from ..eval.poses import rotation_angle_deg
+    from ..io.cameras import read_cameras
+
+    cameras = read_cameras(folder / "cameras.json")
+    report = {}
+    if (folder / "report.json").is_file():
+        try:
+            report = json.loads((folder / "report.json").read_text())
+        except (OSError, ValueError):
+            report = {}
+    alignment = report.get("alignment", {}) if isinstance(report.get("alignment"), dict) else {}
+    aligned, backed = alignment.get("aligned", {}), alignment.get("backed_by_two_views", {})
+    views = [{"name": name, "size": f"{camera.width}x{camera.height}", "focal_px": round(float(camera.K[0, 0]), 1),
+              "registered": aligned.get(name), "backed_by_two_views": backed.get(name)}
+             for name, camera in cameras.cameras.items()]
+    uncertainty = alignment.get("turn_uncertainty_deg") or {}
+    sensitivity = alignment.get("turn_sensitivity_deg") or {}
+    names = cameras.names
+    pairs = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if aligned and not (aligned.get(a) and aligned.get(b)):
+                continue
+            turn = rotation_angle_deg(cameras.cameras[b].rotation @ cameras.cameras[a].rotation.T, np.eye(3))
+            pairs.append({"pair": f"{a}-{b}", "turn_deg": round(float(turn), 2),
+                          "uncertainty_deg": uncertainty.get(f"{a}-{b}"), "moves_with_focal_deg": sensitivity.get(f"{a}-{b}")})
+    splat = report.get("splat") if isinstance(report.get("splat"), dict) else {}
+    described = {"path": str(folder), "kind": "reconstruction folder", "mode": alignment.get("mode"),
+                 "registered": f"{sum(bool(v['registered']) for v in views)} of {len(views)}" if aligned else None,
+                 "residual_px": None if alignment.get("residual_px") is None else round(float(alignment["residual_px"]), 3),
+                 "units": cameras.units, "scale_mm_per_unit": cameras.scale_mm_per_unit, "points": report.get("points"),
+                 "psnr_in_mask_db": splat.get("psnr_in_mask_db"), "version": report.get("version"),
+                 "files": [name for name in RECONSTRUCTION_FILES if (folder / name).exists()]}
+    return {**{k: v for k, v in described.items() if v is not None}, "views": views, "pairs": pairs,
+            "warnings": list(report.get("warnings", []))}
+
+
+def _print_reconstruction(described: dict) -> None:
+    head = {k: v for k, v in described.items() if k not in ("views", "pairs", "warnings", "psnr_in_mask_db")}
+    print(", ".join(f"{k}: {', '.join(v) if isinstance(v, list) else v}" for k, v in head.items()))
+    psnr = described.get("psnr_in_mask_db") or {}
+    for view in described["views"]:
+        state = {True: "registered", False: "not registered", None: ""}[view["registered"]]
+        backed = "" if view["backed_by_two_views"] is None else f", {view['backed_by_two_views']:.0%} backed by a second view"
+        fit = f", splat PSNR {psnr[view['name']]:.1f} dB" if view["name"] in psnr else ""
+        print(f"  {view['name']}: {view['size']}, focal {view['focal_px']:.0f} px" + (f", {state}" if state else "")
+              + backed + fit)
+    for pair in described["pairs"]:
+        sure = "" if pair["uncertainty_deg"] is None else f", ±{pair['uncertainty_deg']:.2f}°"
+        moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal 10 % off"
+        print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + sure + moves)
+    for warning in described["warnings"]:
+        print(f"  warning: {warning}")
 
 
 def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
@@ -55,7 +120,16 @@ def run(args: argparse.Namespace) -> int:
     from ..io.capture import capture_files, is_capture_folder, read_capture
     from ..io.minutiae import read_minutiae
 
+    from ..io.reconstruction_folder import is_reconstruction_folder
+
     paths = args.path
+    if len(paths) == 1 and not is_capture_folder(paths[0]) and is_reconstruction_folder(paths[0]):
+        described = describe_reconstruction(paths[0])
+        if args.json:
+            print(json.dumps([described], indent=2))
+        else:
+            _print_reconstruction(described)
+        return 0
     if len(paths) == 1 and is_capture_folder(paths[0]):
         capture = read_capture(paths[0])
         report = {"path": str(paths[0]), "kind": "capture folder", **describe(capture)}
