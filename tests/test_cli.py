@@ -133,3 +133,7 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "c: 640x512, focal 1500 px, not registered" in out and "turn a-b: 30.00°, ±0.05°" in out
     assert "warning: something to know" in out
+    (rec / "report.json").write_text("{not json")
+    assert main(["info", str(rec), "--json"]) == 0  # the cameras still described, the report's state said
+    described = json.loads(capsys.readouterr().out)[0]
+    assert len(described["pairs"]) == 3 and "report.json could not be read" in described["warnings"][0]

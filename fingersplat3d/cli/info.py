@@ -41,11 +41,13 @@ def describe_reconstruction(folder: Path) -> dict:
     from ..io.cameras import read_cameras
 
     cameras = read_cameras(folder / "cameras.json")
-    report = {}
+    report, problems = {}, []
     if (folder / "report.json").is_file():
         try:
             report = json.loads((folder / "report.json").read_text())
-        except (OSError, ValueError):
+        except (OSError, ValueError) as error:
+            problems.append(f"report.json could not be read ({error}); only the cameras are described")
+        if not isinstance(report, dict):
             report = {}
     alignment = report.get("alignment", {}) if isinstance(report.get("alignment"), dict) else {}
     aligned, backed = alignment.get("aligned", {}), alignment.get("backed_by_two_views", {})
@@ -71,7 +73,7 @@ def describe_reconstruction(folder: Path) -> dict:
                  "psnr_in_mask_db": splat.get("psnr_in_mask_db"), "version": report.get("version"),
                  "files": [name for name in RECONSTRUCTION_FILES if (folder / name).exists()]}
     return {**{k: v for k, v in described.items() if v is not None}, "views": views, "pairs": pairs,
-            "warnings": list(report.get("warnings", []))}
+            "warnings": problems + [str(w) for w in report.get("warnings", []) if isinstance(report.get("warnings"), list)]}
 
 
 def _print_reconstruction(described: dict) -> None:
@@ -79,7 +81,7 @@ def _print_reconstruction(described: dict) -> None:
     print(", ".join(f"{k}: {', '.join(v) if isinstance(v, list) else v}" for k, v in head.items()))
     psnr = described.get("psnr_in_mask_db") or {}
     for view in described["views"]:
-        state = {True: "registered", False: "not registered", None: ""}[view["registered"]]
+        state = "" if view["registered"] is None else "registered" if view["registered"] else "not registered"
         backed = "" if view["backed_by_two_views"] is None else f", {view['backed_by_two_views']:.0%} backed by a second view"
         fit = f", splat PSNR {psnr[view['name']]:.1f} dB" if view["name"] in psnr else ""
         print(f"  {view['name']}: {view['size']}, focal {view['focal_px']:.0f} px" + (f", {state}" if state else "")
