@@ -85,7 +85,7 @@ def single_threaded() -> Iterator[None]:
     matching), where worker threads only add hand-offs and, beside another busy process, spin on the
     cores that process needs. The BLAS pool is limited through threadpoolctl (numpy has no setting of
     its own): a real capture's registration beside another process using both cores took 18.6 s
-    with it free and 7.1 s with it on one thread (4.2 s alone)."""
+    with it free and 8.2 s with it held here (4.5 s alone)."""
     import cv2
     from threadpoolctl import threadpool_limits
 

@@ -220,8 +220,9 @@ def _same_picture(a: np.ndarray, b: np.ndarray) -> bool:
     if a.shape != b.shape:
         return False
     spread = float(np.std(a))
-    return bool(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)) <= SAME_PICTURE * spread) if spread > 0 else \
-        bool(np.array_equal(a, b))
+    if spread == 0.0:
+        return bool(np.array_equal(a, b))
+    return bool(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)) <= SAME_PICTURE * spread)
 
 
 def _distinct_pairs(capture: Capture) -> list[tuple[int, int]]:
