@@ -42,7 +42,8 @@ def check_free(path: str | Path, overwrite: bool = False) -> None:
     """Refuse (``FileExistsError``, one sentence) an existing, non-empty ``path`` unless ``overwrite``."""
     path = Path(path)
     if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
-        raise FileExistsError(f"{path}: already exists and is not empty (use --overwrite to replace it)")
+        what = "a folder with files in it" if path.is_dir() else "a file"
+        raise FileExistsError(f"{path}: already exists ({what}); use --overwrite to replace it")
 
 
 @contextlib.contextmanager

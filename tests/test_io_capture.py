@@ -136,7 +136,7 @@ def test_read_capture_skip_depth_and_arbitrary_units(tmp_path):
 
 def test_overwrite(tmp_path):
     folder = write_capture(make_capture(seed=1), tmp_path / "cap")
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match=r"already exists \(a folder with files in it\); use --overwrite"):
         write_capture(make_capture(seed=2), folder)
     write_capture(make_capture(seed=2), folder, overwrite=True)
     assert_same_capture(read_capture(folder), make_capture(seed=2))
@@ -231,3 +231,10 @@ def test_a_phone_photo_is_read_upright(tmp_path):
     upright, plain = read_image(tmp_path / "phone.jpg"), read_image(tmp_path / "plain.jpg")
     assert plain.shape[:2] == (40, 60) and upright.shape[:2] == (60, 40)
     assert upright[:, :, 0].mean(axis=1)[-1] > upright[:, :, 0].mean(axis=1)[0] + 0.5  # red now grows downward
+
+
+def test_an_output_path_that_is_a_file_is_named_so(tmp_path):
+    (tmp_path / "out").write_text("mine")
+    with pytest.raises(FileExistsError, match=r"already exists \(a file\); use --overwrite"):
+        write_capture(make_capture(seed=1), tmp_path / "out")
+    assert (tmp_path / "out").read_text() == "mine"
