@@ -1,5 +1,6 @@
 """The fs3d command line: help, synth/info/preview end to end, one-line errors with exit code 2."""
 import json
+import shutil
 import subprocess
 import sys
 
@@ -133,6 +134,14 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "c: 640x512, focal 1500 px, not registered" in out and "turn a-b: 30.00°, ±0.05°" in out
     assert "warning: something to know" in out
+    batch = tmp_path / "batch"  # 'fs3d batch -o' writes one reconstruction folder per capture
+    batch.mkdir()
+    for name in ("c10", "c2"):
+        shutil.copytree(rec, batch / name)
+    assert main(["info", str(batch)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].endswith("2 reconstruction folders") and lines[1].startswith("  c2: registered 2 of 3")
+    assert "1 warning(s)" in lines[2]
     (rec / "report.json").write_text("{not json")
     assert main(["info", str(rec), "--json"]) == 0  # the cameras still described, the report's state said
     described = json.loads(capsys.readouterr().out)[0]

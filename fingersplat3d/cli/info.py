@@ -94,6 +94,19 @@ def _print_reconstruction(described: dict) -> None:
         print(f"  warning: {warning}")
 
 
+def _reconstructions_in(folder: Path) -> list[Path]:
+    """The reconstruction folders directly inside ``folder`` (what ``fs3d batch -o`` writes), when it holds no images
+    of its own; else none."""
+    from ..io.images import IMAGE_SUFFIXES
+    from ..io.reconstruction_folder import is_reconstruction_folder
+
+    if not folder.is_dir() or any(p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in folder.iterdir()):
+        return []
+    from ..io.datasets import natural_key
+
+    return sorted((p for p in folder.iterdir() if p.is_dir() and is_reconstruction_folder(p)), key=lambda p: natural_key(p.name))
+
+
 def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
     """When more than one of the images ``paths`` names (files, or the images of folders, as ``load_any`` takes them)
     cannot be read, an ``InputError`` naming each (``named`` of them at most): reading stops at the first, and a user
@@ -121,7 +134,6 @@ def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..io.capture import capture_files, is_capture_folder, read_capture
     from ..io.minutiae import read_minutiae
-
     from ..io.reconstruction_folder import is_reconstruction_folder
 
     paths = args.path
@@ -131,6 +143,19 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps([described], indent=2))
         else:
             _print_reconstruction(described)
+        return 0
+    inner = _reconstructions_in(paths[0]) if len(paths) == 1 and not is_capture_folder(paths[0]) else []
+    if inner:  # a folder of reconstructions ('fs3d batch -o OUT'): one line each
+        described = [describe_reconstruction(folder) for folder in inner]
+        if args.json:
+            print(json.dumps(described, indent=2))
+        else:
+            print(f"{paths[0]}: {len(described)} reconstruction folders")
+            for one in described:
+                warnings = f", {len(one['warnings'])} warning(s)" if one["warnings"] else ""
+                focal = f", focal {one['views'][0]['focal_px']:.0f} px" if one["views"] else ""
+                print(f"  {Path(one['path']).name}: registered {one.get('registered', '?')}, residual "
+                      f"{one.get('residual_px', '?')} px{focal}{warnings}")
         return 0
     if len(paths) == 1 and is_capture_folder(paths[0]):
         capture = read_capture(paths[0])
