@@ -345,7 +345,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                          align, config, rng)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
     # Each pair's least turn from the silhouettes: held by hinge rows only where GlobalAlignConfig.turn_bound_weight > 0.
-    min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals))
+    min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals, prepared.outlines))
     placed = np.asarray(alignment.aligned, bool)
     min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan
     fitted = registered

@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..segment.silhouette import capture_axes, silhouette_frame
+from ..segment.silhouette import SilhouetteFrame, capture_axes, silhouette_frame
 
 __all__ = ["typical_half_width", "turn_lower_bounds_deg", "least_turns_deg", "WIDTH_TOLERANCE"]
 
@@ -41,7 +41,10 @@ read from noise would push right turns apart. Measured on another group's crops:
 def typical_half_width(mask: np.ndarray, hint: np.ndarray | None = None) -> float:
     """The median chord half-width (pixels) over the middle half of a finger silhouette (no tip cap, no cut end);
     ``hint``: the axis of an outline the frame does not cut (:func:`~fingersplat3d.segment.silhouette.capture_axes`)."""
-    width = silhouette_frame(mask, hint=hint).sections.half_width
+    return _middle_median(silhouette_frame(mask, hint=hint).sections.half_width)
+
+
+def _middle_median(width: np.ndarray) -> float:
     count = width.size
     return float(np.median(width[count // 4:max(count - count // 4, count // 4 + 1)]))
 
@@ -64,12 +67,15 @@ def turn_lower_bounds_deg(half_widths_px: Sequence[float], depths: Sequence[floa
     return bounds
 
 
-def least_turns_deg(masks: Sequence[np.ndarray], depths: Sequence[np.ndarray], focals: Sequence[float]) -> np.ndarray:
+def least_turns_deg(masks: Sequence[np.ndarray], depths: Sequence[np.ndarray], focals: Sequence[float],
+                    frames: Sequence[SilhouetteFrame] | None = None) -> np.ndarray:
     """:func:`turn_lower_bounds_deg` of views given their finger masks and depth maps (the median depth over each
-    mask is its scale)."""
+    mask is its scale); ``frames``: the masks' silhouette frames with the capture's axis hints, when the caller has
+    them (a registration keeps them), else made here."""
     typical = []
     for mask, depth in zip(masks, depths):
         inside = depth[mask & np.isfinite(depth)]
         typical.append(float(np.median(inside)) if inside.size else float("nan"))
-    hints = capture_axes(masks)
-    return turn_lower_bounds_deg([typical_half_width(mask, hint) for mask, hint in zip(masks, hints)], typical, focals)
+    if frames is None:
+        frames = [silhouette_frame(mask, hint=hint) for mask, hint in zip(masks, capture_axes(masks))]
+    return turn_lower_bounds_deg([_middle_median(frame.sections.half_width) for frame in frames], typical, focals)
