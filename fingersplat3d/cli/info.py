@@ -38,17 +38,12 @@ def describe_reconstruction(folder: Path) -> dict:
     """What a reconstruction folder says of itself: its cameras (``cameras.json``) and what its ``report.json``
     recorded (registration, how sure, warnings), and which outputs it holds."""
     from ..eval.poses import rotation_angle_deg
-    from ..io.cameras import read_cameras
+    from ..io.reconstruction_folder import ReconstructionFolder
 
-    cameras = read_cameras(folder / "cameras.json")
-    report, problems = {}, []
-    if (folder / "report.json").is_file():
-        try:
-            report = json.loads((folder / "report.json").read_text())
-        except (OSError, ValueError) as error:
-            problems.append(f"report.json could not be read ({error}); only the cameras are described")
-        if not isinstance(report, dict):
-            report = {}
+    folder_read = ReconstructionFolder(folder)
+    cameras, report = folder_read.cameras, folder_read.report
+    problems = (["report.json could not be read (not a JSON object); only the cameras are described"]
+                if not report and (folder / "report.json").is_file() else [])
     alignment = report.get("alignment", {}) if isinstance(report.get("alignment"), dict) else {}
     aligned, backed = alignment.get("aligned", {}), alignment.get("backed_by_two_views", {})
     views = [{"name": name, "size": f"{camera.width}x{camera.height}", "focal_px": round(float(camera.K[0, 0]), 1),
@@ -97,10 +92,10 @@ def _print_reconstruction(described: dict) -> None:
 def _reconstructions_in(folder: Path) -> list[Path]:
     """The reconstruction folders directly inside ``folder`` (what ``fs3d batch -o`` writes), when it holds no images
     of its own; else none."""
-    from ..io.images import IMAGE_SUFFIXES
+    from ..io.datasets import _image_files
     from ..io.reconstruction_folder import is_reconstruction_folder
 
-    if not folder.is_dir() or any(p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in folder.iterdir()):
+    if not folder.is_dir() or _image_files(folder, recursive=False)[0]:
         return []
     from ..io.datasets import natural_key
 
@@ -112,12 +107,13 @@ def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
     cannot be read, an ``InputError`` naming each (``named`` of them at most): reading stops at the first, and a user
     checking a dataset wants to know all. Returns when at most one is unreadable (the caller's error says which)."""
     from ..errors import InputError
-    from ..io.images import IMAGE_SUFFIXES, read_image
+    from ..io.datasets import _image_files
+    from ..io.images import read_image
 
     files = []
     for path in paths:
         if path.is_dir():
-            files += sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+            files += _image_files(path, recursive=False)[0]  # the files load_any reads of a folder
         elif path.is_file():
             files.append(path)
     problems = []
