@@ -105,11 +105,16 @@ def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.nd
     return axis, centre
 
 
+def _on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.ndarray]:
+    """Which of the pixels ``(u, v)`` lie on the image's top, bottom, left and right edge."""
+    rows, cols = shape
+    return [v == 0, v == rows - 1, u == 0, u == cols - 1]
+
+
 def _frame_axis(u: np.ndarray, v: np.ndarray, shape: tuple[int, int], axis: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
     """The axis the frame's cuts give (:func:`finger_axis`), None where they give none (no cut, or a principal direction
     that already runs within 45 degrees of the way in from a single cut)."""
-    rows, cols = shape
-    edges = [v == 0, v == rows - 1, u == 0, u == cols - 1]  # top, bottom, left, right: opposite ones paired
+    edges = _on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
     counts = np.array([int(edge.sum()) for edge in edges])
 
     def cuts(chosen: list[int]) -> bool:
@@ -166,7 +171,7 @@ def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
         if u.size < 16:
             continue
         axis, centre = principal_axis(u, v)
-        if any(int(edge.sum()) for edge in (v == 0, v == mask.shape[0] - 1, u == 0, u == mask.shape[1] - 1)):
+        if any(edge.any() for edge in _on_edges(u, v, mask.shape)):
             continue  # the frame cuts it: its own cuts say more
         free.append((index, axis, _outline(mask, centre)))
     if len(free) < 2:
