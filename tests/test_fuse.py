@@ -103,12 +103,25 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     assert report["stages"]["splat"]["seconds"] > 0 and len(report["splat"]["psnr_in_mask_db"]) == 3
     # one name per setting: the flag, the config field and report.json say the same
     assert report["splat"]["preset"] == "fast" and report["splat"]["differs_from_preset"] == {"iterations": 4}
+    # the shading exponent, estimated on the skin two views see, is what gaussians.ply carries
+    shading = report["splat"]["shading"]
+    assert shading["points"] > 1000 and 0.0 <= shading["facing_exponent"] < 1.0
+    assert sorted(shading["exposure_estimate"]) == ["center", "left", "right"]
+    from fingersplat3d.io.gaussians_ply import read_gaussians_ply
+    assert read_gaussians_ply(out / "gaussians.ply").facing_exponent == pytest.approx(shading["facing_exponent"], abs=1e-4)
     # Novel views on the arc from the leftmost to the rightmost camera.
     assert main(["render", str(out), "--count", "3", "--scale", "0.25"]) == 0
     renders = sorted(p.name for p in (out / "renders").glob("arc_*.png"))
     assert renders == ["arc_00.png", "arc_00_alpha.png", "arc_01.png", "arc_01_alpha.png", "arc_02.png", "arc_02_alpha.png"]
     assert (out / "renders" / "contact_sheet.png").is_file() and (out / "renders" / "depth" / "arc_01.npy").is_file()
     assert main(["render", str(out)]) == 2  # renders/ exists: refuses without --overwrite
+    # --no-shading: the plain SH degree 0 model, said so in report.json and gaussians.ply
+    plain = tmp_path / "plain"
+    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(plain), "--splat-preset", "fast",
+                 "--splat-iterations", "2", "--no-shading"]) == 0
+    plain_report = json.loads((plain / "report.json").read_text())["splat"]
+    assert plain_report["differs_from_preset"] == {"iterations": 2, "facing_shading": False}
+    assert plain_report["shading"]["facing_exponent"] == 0.0 and read_gaussians_ply(plain / "gaussians.ply").facing_exponent == 0.0
     # The same images given as a list of files.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
     assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat", "--px-per-mm", "17.8"]) == 0

@@ -45,6 +45,9 @@ def add_splat_arguments(parser) -> None:
                        help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
                             "(--splat-budget-density: its former name)")
     splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
+    splat.add_argument("--no-shading", action="store_true",
+                       help="one colour per Gaussian whatever the view (the paper's plain SH degree 0), instead of the "
+                            "skin darkening with the slant at which each camera sees it")
 
 
 def add_dataset_arguments(parser) -> None:
@@ -63,7 +66,8 @@ def splat_config(args: argparse.Namespace):
     if args.no_splat:
         return None
     return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
-                  refine_poses=False if args.no_pose_refinement else None)
+                  refine_poses=False if args.no_pose_refinement else None,
+                  facing_shading=False if getattr(args, "no_shading", False) else None)
 
 
 def fuse_config(args: argparse.Namespace):

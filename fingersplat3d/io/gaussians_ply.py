@@ -8,6 +8,9 @@ MeshLab open the files: one ``vertex`` element, binary little endian, float32 pr
 with the raw parameters: normals zero, ``f_dc`` the SH DC coefficient, ``opacity`` a logit,
 ``scale_*`` natural-log standard deviations, ``rot_*`` a wxyz quaternion. A grayscale model writes
 its one channel into all three ``f_dc``; the reader collapses them back when asked (``channels=1``).
+The capture's shading exponent (:mod:`fingersplat3d.splat.shading`) is a header comment,
+``comment fs3d facing_exponent 0.42``: other tools skip it and render ``f_dc``, the skin seen face on;
+a file without it reads with exponent 0.
 
 The reader accepts what other 3DGS tools write: higher-degree SH (``f_rest_*``) and any extra
 properties are ignored, properties may be float or double, the file may be big or little endian. Reading and writing go
@@ -22,16 +25,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import input_error
-from .ply import read_vertex_element, write_vertex_ply
+from .ply import read_vertex_ply, write_vertex_ply
 
 if TYPE_CHECKING:  # torch is imported on use, so ``import fingersplat3d.io`` stays light
     from ..splat.gaussians import Gaussians
 
-__all__ = ["GAUSSIAN_PLY_FIELDS", "write_gaussians_ply", "read_gaussians_ply"]
+__all__ = ["GAUSSIAN_PLY_FIELDS", "write_gaussians_ply", "read_gaussians_ply", "EXPONENT_COMMENT"]
 
 GAUSSIAN_PLY_FIELDS = ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
                        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _REQUIRED = tuple(name for name in GAUSSIAN_PLY_FIELDS if name not in ("nx", "ny", "nz"))
+EXPONENT_COMMENT = "fs3d facing_exponent"
+"""The header comment that carries the model's shading exponent, followed by the number."""
 
 
 def write_gaussians_ply(path: str | Path, gaussians: "Gaussians") -> Path:
@@ -53,7 +58,8 @@ def write_gaussians_ply(path: str | Path, gaussians: "Gaussians") -> Path:
     columns.update({f"rot_{i}": quats[:, i] for i in range(4)})
     for name, values in columns.items():
         block[name] = values
-    return write_vertex_ply(path, block, "3D Gaussian splats written by fingersplat3d")
+    return write_vertex_ply(path, block, ["3D Gaussian splats written by fingersplat3d",
+                                          f"{EXPONENT_COMMENT} {float(gaussians.facing_exponent)!r}"])
 
 
 def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussians":
@@ -66,7 +72,8 @@ def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussi
     if channels not in (None, 1, 3):
         raise ValueError(f"channels must be None, 1 or 3, got {channels}")
     path = Path(path)
-    vertices = read_vertex_element(path, "3D Gaussian PLY")
+    vertices, comments = read_vertex_ply(path, "3D Gaussian PLY")
+    exponent = _facing_exponent(path, comments)
     dtype = vertices.dtype
     missing = [name for name in _REQUIRED if name not in dtype.names]
     if missing:
@@ -92,4 +99,21 @@ def read_gaussians_ply(path: str | Path, channels: int | None = None) -> "Gaussi
     from ..splat.gaussians import Gaussians
 
     return Gaussians(torch.from_numpy(means), torch.from_numpy(quats), torch.from_numpy(log_scales),
-                     torch.from_numpy(np.ascontiguousarray(opacity_logits)), torch.from_numpy(sh_dc))
+                     torch.from_numpy(np.ascontiguousarray(opacity_logits)), torch.from_numpy(sh_dc), exponent)
+
+
+def _facing_exponent(path: Path, comments: list[str]) -> float:
+    """The shading exponent of the header's ``EXPONENT_COMMENT`` line; 0 without one."""
+    from ..splat.shading import MAX_EXPONENT
+
+    for line in comments:
+        if line.startswith(EXPONENT_COMMENT + " "):
+            text = line[len(EXPONENT_COMMENT):].strip()
+            try:
+                value = float(text)
+            except ValueError:
+                value = float("nan")
+            if not 0.0 <= value <= MAX_EXPONENT:
+                raise input_error(path, f"the header's '{EXPONENT_COMMENT}' is not a number in [0, {MAX_EXPONENT:g}]: {text!r}")
+            return value
+    return 0.0

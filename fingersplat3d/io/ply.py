@@ -16,7 +16,7 @@ from plyfile import PlyData, PlyElement, PlyElementParseError, PlyHeaderParseErr
 from ..atomic import atomic_path
 from ..errors import input_error
 
-__all__ = ["write_mesh_ply", "write_points_ply", "write_vertex_ply", "read_vertex_element"]
+__all__ = ["write_mesh_ply", "write_points_ply", "write_vertex_ply", "read_vertex_element", "read_vertex_ply"]
 
 
 def _vertex_block(vertices: np.ndarray, normals: np.ndarray | None, colors: np.ndarray | None) -> np.ndarray:
@@ -41,15 +41,17 @@ def _vertex_block(vertices: np.ndarray, normals: np.ndarray | None, colors: np.n
     return block
 
 
-def _write(path: str | Path, elements: list[PlyElement], comment: str) -> Path:
+def _write(path: str | Path, elements: list[PlyElement], comments: str | list[str]) -> Path:
     path = Path(path)
     with atomic_path(path) as temporary:
-        PlyData(elements, text=False, byte_order="<", comments=[comment]).write(str(temporary))
+        PlyData(elements, text=False, byte_order="<",
+                comments=[comments] if isinstance(comments, str) else list(comments)).write(str(temporary))
     return path
 
 
-def write_vertex_ply(path: str | Path, block: np.ndarray, comment: str = "written by fingersplat3d") -> Path:
-    """One ``vertex`` element from a structured array (its fields are the properties), atomically."""
+def write_vertex_ply(path: str | Path, block: np.ndarray, comment: str | list[str] = "written by fingersplat3d") -> Path:
+    """One ``vertex`` element from a structured array (its fields are the properties), atomically; ``comment``:
+    the header's comment line, or lines."""
     return _write(path, [PlyElement.describe(block, "vertex")], comment)
 
 
@@ -77,6 +79,11 @@ def read_vertex_element(path: str | Path, what: str = "PLY") -> np.ndarray:
 
     ``what`` names the expected kind of file in the messages ("3D Gaussian PLY", ...).
     """
+    return read_vertex_ply(path, what)[0]
+
+
+def read_vertex_ply(path: str | Path, what: str = "PLY") -> tuple[np.ndarray, list[str]]:
+    """:func:`read_vertex_element`'s array and the header's comment lines."""
     path = Path(path)
     if not path.is_file():
         raise input_error(path, f"no such {what} file")
@@ -96,7 +103,7 @@ def read_vertex_element(path: str | Path, what: str = "PLY") -> np.ndarray:
     vertices = data.elements[0].data
     if any(vertices.dtype[name].kind == "O" for name in vertices.dtype.names):
         raise input_error(path, f"not a {what}: the vertex element has list properties")
-    return vertices.astype(vertices.dtype.newbyteorder("="))
+    return vertices.astype(vertices.dtype.newbyteorder("=")), [str(line) for line in data.comments]
 
 
 def _one_line(error: Exception) -> str:

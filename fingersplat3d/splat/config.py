@@ -85,6 +85,11 @@ class SplatConfig:
     """Learning rate of the pose corrections' axis-angle (radians)."""
     lr_pose_translation: float = 1e-3
     """Learning rate of the pose corrections' translation, times the scene extent."""
+    # --- shading -------------------------------------------------------------------------------
+    facing_shading: bool = True
+    """Darken each Gaussian's colour by the cosine at which a camera sees it, to the power of the capture's
+    exponent estimated from the registered geometry before the fit (:mod:`~fingersplat3d.splat.shading`);
+    False: one colour per Gaussian whatever the view, the plain SH degree 0 model."""
     # --- rendering -----------------------------------------------------------------------------
     near_fraction: float = 0.01
     """Near plane as a fraction of the camera-to-finger distance."""

@@ -4,8 +4,9 @@
 camera poses, InstantSplat-style) with Adam, per-group learning rates, one view per step, the loss
 ``(1 - l) L1 + l (1 - SSIM)`` inside the finger mask, and adaptive density control under a budget
 that follows the finger's area and ridge frequency (:func:`gaussian_budget`). No background
-Gaussians, no view-dependent colour. ``fit_camera`` aligns one camera to a photo with the model
-frozen (used to evaluate held-out views, as pose-free 3DGS methods do).
+Gaussians; the one view-dependent term is the model's shading exponent (:mod:`.shading`), which the
+fit keeps as it is given. ``fit_camera`` aligns one camera to a photo with the model frozen (used to
+evaluate held-out views, as pose-free 3DGS methods do).
 
 Runs on the device of ``device`` (default: CUDA when present, else CPU). No Open3D, no files.
 """
@@ -27,6 +28,7 @@ from .gaussians import Gaussians, sh_to_rgb
 from .losses import photometric_loss
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
+from .shading import facing_cosines, shade
 from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, param_group
 
 __all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget",
@@ -127,9 +129,15 @@ def render_camera(gaussians: Gaussians, camera: Camera, near: float, world_to_ca
 
 
 def _render(model: Gaussians, world_to_cam: torch.Tensor, K: torch.Tensor, width: int, height: int, near: float,
-            background: torch.Tensor | None = None, backend: str = "auto") -> RenderOutput:
-    """Rasterize raw parameters: activated scales and opacities, SH DC colour clamped at 0 (as 3DGS)."""
-    return rasterize(model.means, model.quats, model.scales, model.opacities, sh_to_rgb(model.sh_dc).clamp_min(0.0),
+            background: torch.Tensor | None = None, backend: str = "auto", exponent: float | None = None) -> RenderOutput:
+    """Rasterize raw parameters: activated scales and opacities, SH DC colour clamped at 0 (as 3DGS), darkened by
+    the cosine at which this camera sees each Gaussian to the power ``exponent`` (default: the model's;
+    :mod:`.shading`; at 0 the colours are the SH DC ones exactly)."""
+    colors = sh_to_rgb(model.sh_dc).clamp_min(0.0)
+    exponent = model.facing_exponent if exponent is None else exponent
+    if exponent != 0:
+        colors = shade(colors, facing_cosines(model.means, model.quats, model.log_scales, world_to_cam), exponent)
+    return rasterize(model.means, model.quats, model.scales, model.opacities, colors,
                      world_to_cam, K, width, height, near=near, background=background, backend=backend)
 
 
@@ -167,7 +175,8 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
     """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger.
 
     ``depths``: optional ``[H, W]`` prior depth per view (the geometry stage's, NaN = none); with
-    ``lambda_depth > 0`` the rendered depth is kept near it (relative L1 inside the mask).
+    ``lambda_depth > 0`` the rendered depth is kept near it (relative L1 inside the mask). The renders are shaded
+    with ``initial.facing_exponent``, which the fitted model keeps.
     """
     from tqdm import tqdm
 
@@ -202,7 +211,8 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         pose = target.world_to_cam
         if config.refine_poses and v != 0:
             pose = apply_pose_correction(pose, rotation[v], translation[v])
-        out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer)
+        out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer,
+                      exponent=model.facing_exponent)
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
@@ -222,7 +232,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         if step % 10 == 0:
             bar.set_postfix(loss=f"{losses[-1]:.4f}", gaussians=len(current))
     bar.close()
-    fitted = gaussians_of(optimizer).detach()
+    fitted = gaussians_of(optimizer).detach().with_(facing_exponent=model.facing_exponent)
     refined = list(cameras)
     if config.refine_poses:
         with torch.no_grad():

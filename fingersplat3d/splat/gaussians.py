@@ -3,7 +3,9 @@
 Parameters are stored as 3DGS stores them, so the PLY export is a copy: ``log_scales`` (natural
 log of the standard deviations), ``opacity_logits`` (logit of the opacity), ``quats`` (wxyz, any
 norm) and ``sh_dc`` (the SH degree-0 coefficient, ``colour = 0.5 + SH_C0 * sh_dc``). Grayscale
-models have one colour channel, RGB models three; there is no view-dependent colour.
+models have one colour channel, RGB models three. The one view-dependent term is the capture's
+``facing_exponent``: a camera sees each colour darkened by the cosine at which it sees the Gaussian to
+that power (:mod:`.shading`; 0 = none, the plain SH degree 0 model), so ``sh_dc`` is the skin seen face on.
 """
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from ..rotations import normalize_quaternions, quaternion_to_matrix
+from .shading import MAX_EXPONENT
 
 __all__ = ["Gaussians", "SH_C0", "rgb_to_sh", "sh_to_rgb", "covariance_3d"]
 
@@ -36,8 +39,12 @@ class Gaussians:
     log_scales: torch.Tensor  # [N, 3] log standard deviations along the rotated axes
     opacity_logits: torch.Tensor  # [N]
     sh_dc: torch.Tensor  # [N, C] C = 1 (grayscale) or 3 (RGB)
+    facing_exponent: float = 0.0  # the capture's shading exponent (module docstring); 0 = no view-dependent term
 
     def __post_init__(self) -> None:
+        exponent = self.facing_exponent
+        if isinstance(exponent, bool) or not isinstance(exponent, (int, float)) or not 0.0 <= exponent <= MAX_EXPONENT:
+            raise ValueError(f"Gaussians.facing_exponent must be a number in [0, {MAX_EXPONENT:g}], got {exponent!r}")
         n = self.means.shape[0]
         expected = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,)}
         for name, shape in expected.items():
@@ -76,22 +83,27 @@ class Gaussians:
     def subset(self, keep: torch.Tensor) -> "Gaussians":
         """The Gaussians selected by a boolean mask or an index tensor."""
         return Gaussians(self.means[keep], self.quats[keep], self.log_scales[keep], self.opacity_logits[keep],
-                         self.sh_dc[keep])
+                         self.sh_dc[keep], self.facing_exponent)
 
     def detach(self) -> "Gaussians":
-        return Gaussians(*(t.detach() for t in self.tensors()))
+        return Gaussians(*(t.detach() for t in self.tensors()), self.facing_exponent)
 
     def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> "Gaussians":
-        return Gaussians(*(t.to(device=device, dtype=dtype) for t in self.tensors()))
+        return Gaussians(*(t.to(device=device, dtype=dtype) for t in self.tensors()), self.facing_exponent)
 
     def tensors(self) -> tuple[torch.Tensor, ...]:
         return self.means, self.quats, self.log_scales, self.opacity_logits, self.sh_dc
 
     @staticmethod
     def concat(parts: list["Gaussians"]) -> "Gaussians":
-        return Gaussians(*(torch.cat(group) for group in zip(*(p.tensors() for p in parts))))
+        """One model of ``parts`` (their shading exponents must agree: they are one capture's)."""
+        exponents = {p.facing_exponent for p in parts}
+        if len(exponents) > 1:
+            raise ValueError(f"Gaussians.concat: the parts' facing exponents differ ({sorted(exponents)})")
+        return Gaussians(*(torch.cat(group) for group in zip(*(p.tensors() for p in parts))),
+                         exponents.pop() if exponents else 0.0)
 
-    def with_(self, **changes: torch.Tensor) -> "Gaussians":
+    def with_(self, **changes) -> "Gaussians":
         return replace(self, **changes)
 
 

@@ -58,8 +58,9 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     budget = gaussian_budget(train_views, config, None if periods is None else [periods[v] for v in fitted_views])
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
     train_depths = [depths[v] for v in fitted_views] if depths is not None else None
-    fit = fit_gaussians(initial, train_views, train_cameras, config, budget=budget, device=device, depths=train_depths,
-                        progress=progress)
+    shading = _shading(train_views, train_cameras, train_depths, config)
+    fit = fit_gaussians(initial.with_(facing_exponent=shading.exponent), train_views, train_cameras, config,
+                        budget=budget, device=device, depths=train_depths, progress=progress)
     masks = [view.mask for view in train_views]
     model = fit.gaussians
     outside_before = _alpha_outside(model, fit.cameras, masks, config)
@@ -93,9 +94,22 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
               "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
               "polish_seconds": round(polish_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
+              "shading": {"facing_exponent": round(shading.exponent, 4), "points": shading.points,
+                          "exposure_estimate": {train_views[k].name: round(float(np.exp(g)), 4)
+                                                for k, g in enumerate(shading.log_gains)}},
               "densify": [asdict(d) for d in fit.densify], "psnr_in_mask_db": psnrs,
               "pose_correction_deg": corrections, "clean": asdict(clean_stats), "alpha_outside_mask": {"before": outside_before, "after": round(float(np.mean(outside_after)), 5)}}
     return SplatStage(cleaned.to("cpu"), refined, depths, report)
+
+
+def _shading(views: Sequence[View], cameras: Sequence[Camera], depths, config: SplatConfig):
+    """The capture's shading exponent, estimated from the registered geometry (:mod:`.shading_estimate`) when it is
+    on and there is any; else none."""
+    from .shading_estimate import ShadingEstimate, estimate_shading
+
+    if not config.facing_shading or depths is None:
+        return ShadingEstimate(0.0, [0.0] * len(views), 0)
+    return estimate_shading([view.image for view in views], [view.mask for view in views], cameras, depths)
 
 
 def _alpha_outside(model: Gaussians, cameras: Sequence[Camera], masks, config: SplatConfig) -> float:

@@ -135,7 +135,7 @@ def split_gaussians(gaussians: Gaussians, axes: torch.Tensor, child_scale: float
         return tensor.repeat_interleave(2, dim=0)
 
     return Gaussians(means, twice(gaussians.quats), twice(log_scales), twice(gaussians.opacity_logits),
-                     twice(gaussians.sh_dc))
+                     twice(gaussians.sh_dc), gaussians.facing_exponent)
 
 
 def clean_with_masks(gaussians: Gaussians, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
