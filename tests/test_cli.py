@@ -119,7 +119,7 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
         poses.append(pose)
     write_cameras(rec / "cameras.json", [(name, f"{name}.png", Camera.from_focal(1500.0, 640, 512, pose))
                                          for name, pose in zip(("a", "b", "c"), poses)])
-    report = {"version": "x", "points": 10, "warnings": ["something to know"],
+    report = {"version": "x", "points": 10, "warnings": ["something to know"], "splat": {"shading": {"facing_exponent": 0.37}},
               "alignment": {"mode": "multi-view", "aligned": {"a": True, "b": True, "c": False}, "residual_px": 0.4,
                             "backed_by_two_views": {"a": 0.9, "b": 0.8, "c": None},
                             "turn_uncertainty_deg": {"a-b": 0.05}, "turn_sensitivity_deg": {"a-b": 0.7}}}
@@ -130,10 +130,11 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     assert [p["pair"] for p in described["pairs"]] == ["a-b"]  # c is not registered
     assert described["pairs"][0]["turn_deg"] == pytest.approx(30.0, abs=1e-6)
     assert described["warnings"] == ["something to know"] and described["files"] == ["report.json"]
+    assert described["shading_exponent"] == 0.37  # how much darker the skin at a slant (gaussians.ply's exponent)
     assert main(["info", str(rec)]) == 0
     out = capsys.readouterr().out
     assert "c: 640x512, focal 1500 px, not registered" in out and "turn a-b: 30.00°, ±0.05°" in out
-    assert "warning: something to know" in out
+    assert "warning: something to know" in out and "shading_exponent: 0.37" in out
     batch = tmp_path / "batch"  # 'fs3d batch -o' writes one reconstruction folder per capture
     batch.mkdir()
     for name in ("c10", "c2"):

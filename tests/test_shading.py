@@ -122,6 +122,17 @@ def test_the_estimate_recovers_a_known_exponent_and_exposures(exponent, gains):
     assert np.allclose(estimate.log_gains, gains, atol=0.04) and estimate.log_gains[0] == 0.0
 
 
+def test_the_estimate_leaves_clipped_skin_out():
+    cameras = [_camera(0.0), _camera(-40.0), _camera(40.0)]
+    views, depths = _photos(_half_cylinder(0.45), cameras, (0.0, 0.0, 0.0))
+    # the front photo overexposed 2.2x and clipped: its brightest skin reads 1 wherever it was brighter
+    views[0] = View("v0", np.clip(2.2 * views[0].image, 0.0, 1.0), views[0].mask)
+    assert (views[0].image[views[0].mask] >= 1.0).mean() > 0.3
+    estimate = estimate_shading([v.image for v in views], [v.mask for v in views], cameras, depths, blur_px=2.0, stride=1)
+    assert estimate.points > 500 and estimate.exponent == pytest.approx(0.45, abs=0.15)
+    assert estimate.log_gains[1] == pytest.approx(-math.log(2.2), abs=0.06)
+
+
 def test_the_estimate_needs_shared_skin():
     cameras = [_camera(0.0), _camera(40.0)]
     views, depths = _photos(_half_cylinder(0.5), cameras, (0.0, 0.0))

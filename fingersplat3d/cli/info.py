@@ -61,11 +61,13 @@ def describe_reconstruction(folder: Path) -> dict:
             pairs.append({"pair": f"{a}-{b}", "turn_deg": round(float(turn), 2),
                           "uncertainty_deg": uncertainty.get(f"{a}-{b}"), "moves_with_focal_deg": sensitivity.get(f"{a}-{b}")})
     splat = report.get("splat") if isinstance(report.get("splat"), dict) else {}
+    shading = splat.get("shading") if isinstance(splat.get("shading"), dict) else {}
     described = {"path": str(folder), "kind": "reconstruction folder", "mode": alignment.get("mode"),
                  "registered": f"{sum(bool(v['registered']) for v in views)} of {len(views)}" if aligned else None,
                  "residual_px": None if alignment.get("residual_px") is None else round(float(alignment["residual_px"]), 3),
                  "units": cameras.units, "scale_mm_per_unit": cameras.scale_mm_per_unit, "points": report.get("points"),
-                 "psnr_in_mask_db": splat.get("psnr_in_mask_db"), "version": report.get("version"),
+                 "psnr_in_mask_db": splat.get("psnr_in_mask_db"), "shading_exponent": shading.get("facing_exponent"),
+                 "version": report.get("version"),
                  "files": [name for name in RECONSTRUCTION_FILES if (folder / name).exists()]}
     return {**{k: v for k, v in described.items() if v is not None}, "views": views, "pairs": pairs,
             "warnings": problems + [str(w) for w in report.get("warnings", []) if isinstance(report.get("warnings"), list)]}

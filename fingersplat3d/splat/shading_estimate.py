@@ -30,6 +30,7 @@ __all__ = ["ShadingEstimate", "estimate_shading", "MIN_POINTS"]
 MIN_POINTS = 200
 """Fewer point pairs than this (views that share little skin): no estimate, the shading starts at none."""
 MIN_COSINE = 0.15  # points seen more slanted than ~81 degrees by either camera are left out (the normals' error)
+SATURATED = 0.98  # brightness (of 1) at which a photo may be clipped: such points say nothing of the ratio
 DEPTH_AGREEMENT = 0.01  # a point is seen by b when b's depth there is within this share of b's median depth
 STRIDE = 4  # sample every 4th pixel of each view, both ways
 OUTLIER_DEVIATIONS = 3.0
@@ -111,7 +112,8 @@ def estimate_shading(images: Sequence[np.ndarray], masks: Sequence[np.ndarray], 
             cos_b = _cosines(p, n, cameras[b].center)
             brightness_b = np.zeros(len(p), np.float32)
             brightness_b[seen] = blurred[b][v[seen], u[seen]]
-            use = seen & (cos_a > MIN_COSINE) & (cos_b > MIN_COSINE) & (brightness_a > 1e-3) & (brightness_b > 1e-3)
+            use = (seen & (cos_a > MIN_COSINE) & (cos_b > MIN_COSINE) & (brightness_a > 1e-3) & (brightness_b > 1e-3)
+                   & (brightness_a < SATURATED) & (brightness_b < SATURATED))
             if not use.any():
                 continue
             rows_x.append(np.log(cos_a[use] / cos_b[use]))
