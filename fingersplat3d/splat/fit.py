@@ -146,14 +146,14 @@ def render_camera(gaussians: Gaussians, camera: Camera, near: float, world_to_ca
 
 
 def _render(model: Gaussians, world_to_cam: torch.Tensor, K: torch.Tensor, width: int, height: int, near: float,
-            background: torch.Tensor | None = None, backend: str = "auto", exponent: float | None = None) -> RenderOutput:
+            background: torch.Tensor | None = None, backend: str = "auto") -> RenderOutput:
     """Rasterize raw parameters: activated scales and opacities, SH DC colour clamped at 0 (as 3DGS), darkened by
-    the cosine at which this camera sees each Gaussian to the power ``exponent`` (default: the model's;
-    :mod:`.shading`; at 0 the colours are the SH DC ones exactly)."""
+    the cosine at which this camera sees each Gaussian to the power of the model's ``facing_exponent``
+    (:mod:`.shading`; at 0 the colours are the SH DC ones exactly)."""
     colors = sh_to_rgb(model.sh_dc).clamp_min(0.0)
-    exponent = model.facing_exponent if exponent is None else exponent
-    if exponent != 0:
-        colors = shade(colors, facing_cosines(model.means, model.quats, model.log_scales, world_to_cam), exponent)
+    if model.facing_exponent != 0:
+        cosines = facing_cosines(model.means, model.quats, model.log_scales, world_to_cam)
+        colors = shade(colors, cosines, model.facing_exponent)
     return rasterize(model.means, model.quats, model.scales, model.opacities, colors,
                      world_to_cam, K, width, height, near=near, background=background, backend=backend)
 
@@ -225,12 +225,11 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
             order = list(order_rng.permutation(len(views)))
         v = order.pop()
         target = targets[v]
-        current = gaussians_of(optimizer)
+        current = gaussians_of(optimizer).with_(facing_exponent=model.facing_exponent)
         pose = target.world_to_cam
         if config.refine_poses and v != 0:
             pose = apply_pose_correction(pose, rotation[v] * turn_scales[v], translation[v])
-        out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer,
-                      exponent=model.facing_exponent)
+        out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer)
         out.means2d.retain_grad()
         loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background

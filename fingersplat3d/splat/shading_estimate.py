@@ -19,9 +19,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-import cv2
 import numpy as np
 
+from ..align.correspond.texture import as_gray, masked_blur
+from ..sampling import sample_nearest
 from ..scene import Camera
 from .shading import MAX_EXPONENT
 
@@ -42,18 +43,10 @@ class ShadingEstimate:
     log_gains: list[float]  # one per view, the first 0
     points: int  # point pairs the estimate rests on (0: none made)
 
-
-def _gray(image: np.ndarray) -> np.ndarray:
-    return (image.mean(axis=-1) if image.ndim == 3 else image).astype(np.float32)
-
-
-def _blur_inside(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
-    """``image`` blurred by ``sigma`` over the finger only (normalised convolution): the dark background must not
-    darken the rims, where the slant is largest and the exponent is read."""
-    weight = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), sigma)
-    total = cv2.GaussianBlur(np.where(mask, image, 0.0).astype(np.float32), (0, 0), sigma)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(mask & (weight > 1e-3), total / weight, 0.0).astype(np.float32)
+    @classmethod
+    def none(cls, views: int) -> "ShadingEstimate":
+        """No estimate: no shading, every exposure 1."""
+        return cls(0.0, [0.0] * views, 0)
 
 
 def _points_and_normals(camera: Camera, depth: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -80,13 +73,15 @@ def estimate_shading(images: Sequence[np.ndarray], masks: Sequence[np.ndarray], 
     ``blur_px``: the blur past the ridges (default: the image width / 160, about a ridge period); ``stride``: every
     how many pixels of each view a point is taken."""
     count = len(images)
-    none = ShadingEstimate(0.0, [0.0] * count, 0)
+    none = ShadingEstimate.none(count)
     if count < 2:
         return none
-    blurred = [_blur_inside(_gray(image), np.asarray(mask, bool), (image.shape[1] / 160.0) if blur_px is None else blur_px)
+    masks = [np.asarray(mask, bool) for mask in masks]
+    depths = [np.where(mask, depth, np.nan) for mask, depth in zip(masks, depths)]  # the finger's skin only
+    # blurred over the finger only: the dark background must not darken the rims, where the slant is read
+    blurred = [masked_blur(as_gray(image), mask.astype(np.float32), (image.shape[1] / 160.0) if blur_px is None else blur_px)
                for image, mask in zip(images, masks)]
-    geometry = [_points_and_normals(camera, np.where(mask, depth, np.nan), max(1, int(stride)))
-                for camera, mask, depth in zip(cameras, masks, depths)]
+    geometry = [_points_and_normals(camera, depth, max(1, int(stride))) for camera, depth in zip(cameras, depths)]
     medians = [float(np.nanmedian(depth)) if np.isfinite(depth).any() else np.nan for depth in depths]
     rows_x, rows_y, pairs = [], [], []
     for a in range(count):
@@ -101,17 +96,10 @@ def estimate_shading(images: Sequence[np.ndarray], masks: Sequence[np.ndarray], 
             if b == a or not np.isfinite(medians[b]):
                 continue
             uv, z = cameras[b].project(p)
-            rows, cols = depths[b].shape
-            inside = np.isfinite(uv).all(1)
-            u = np.where(inside, np.round(uv[:, 0]), -1).astype(int)
-            v = np.where(inside, np.round(uv[:, 1]), -1).astype(int)
-            inside &= (u >= 0) & (v >= 0) & (u < cols) & (v < rows)
-            seen = np.zeros(len(p), bool)
-            seen[inside] = (np.asarray(masks[b], bool)[v[inside], u[inside]]
-                            & (np.abs(depths[b][v[inside], u[inside]] - z[inside]) < DEPTH_AGREEMENT * medians[b]))
+            with np.errstate(invalid="ignore"):  # NaN where b has no skin there
+                seen = np.abs(sample_nearest(depths[b], uv) - z) < DEPTH_AGREEMENT * medians[b]
             cos_b = _cosines(p, n, cameras[b].center)
-            brightness_b = np.zeros(len(p), np.float32)
-            brightness_b[seen] = blurred[b][v[seen], u[seen]]
+            brightness_b = np.where(seen, sample_nearest(blurred[b], uv), 0.0).astype(np.float32)
             use = (seen & (cos_a > MIN_COSINE) & (cos_b > MIN_COSINE) & (brightness_a > 1e-3) & (brightness_b > 1e-3)
                    & (brightness_a < SATURATED) & (brightness_b < SATURATED))
             if not use.any():

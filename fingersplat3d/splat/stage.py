@@ -108,7 +108,7 @@ def _shading(views: Sequence[View], cameras: Sequence[Camera], depths, config: S
     from .shading_estimate import ShadingEstimate, estimate_shading
 
     if not config.facing_shading or depths is None:
-        return ShadingEstimate(0.0, [0.0] * len(views), 0)
+        return ShadingEstimate.none(len(views))
     return estimate_shading([view.image for view in views], [view.mask for view in views], cameras, depths)
 
 
