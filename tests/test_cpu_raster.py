@@ -1,4 +1,6 @@
 """The compiled CPU rasterizer (numba): early termination, binning, threads, projection twin."""
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -105,6 +107,56 @@ def test_kernels_compiled_for_a_feature_count_equal_the_general_ones(monkeypatch
     assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
     for a, b in zip(results[0][2], results[1][2]):
         assert torch.allclose(a, b, rtol=1e-5, atol=1e-7)  # the same sums, fused multiply-adds placed apart
+
+
+def _kernel_inputs(channels, seed=8, width=70, height=50):
+    """The compositing kernels' inputs for a float64 scene whose tiles are cut by the image's right and bottom
+    edges, with one long thin diagonal Gaussian whose box corners lie far outside its ellipse, so that its falloff
+    is evaluated per pixel (record column EA = 0) instead of by products."""
+    from fingersplat3d.splat import cpu_composite
+
+    args, width, height = random_scene(seed, n=300, channels=channels, width=width, height=height)
+    means, quats, scales, opacities, colors, world_to_cam, K = args
+    scales[0] = torch.tensor([1.5, 0.002, 0.002], dtype=F64)  # one wide, thin Gaussian ...
+    quats[0] = torch.tensor([math.cos(math.pi / 8), 0.0, 0.0, math.sin(math.pi / 8)], dtype=F64)  # ... turned 45 deg
+    means[0] = torch.tensor([0.0, 0.0, 3.0], dtype=F64)
+    opacities[0] = 0.9
+    projection, boxes = project_cpu(means, quats, scales, opacities, world_to_cam, K, width, height, 0.01, 0.3)
+    feats = torch.cat([colors, projection.depths[:, None]], 1).numpy()
+    order = depth_order(projection.depths.numpy(), projection.valid.numpy())
+    records = cpu_composite.prepare(order, projection.means2d.numpy(), projection.conics.numpy(), opacities.numpy(),
+                                    boxes.numpy(), feats)
+    tiles_x, tiles_y = -(-width // cpu_composite.TILE), -(-height // cpu_composite.TILE)
+    starts, ranks, _, _ = cpu_composite.bin_tiles(records, tiles_x, tiles_y)
+    pairs = cpu_composite.gather_pairs(records, ranks)
+    return starts, pairs, width, height, tiles_x, records
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+@pytest.mark.parametrize("min_transmittance", [0.0, MIN_TRANSMITTANCE])
+def test_vectorised_kernels_equal_the_general_ones_in_float64(channels, min_transmittance):
+    from fingersplat3d.splat import cpu_composite
+    from fingersplat3d.splat.cpu_tile_math import EA
+
+    starts, pairs, width, height, tiles_x, records = _kernel_inputs(channels)
+    assert (records[:, EA] == 0.0).any()  # the per-pixel falloff is exercised
+    lanes, general = cpu_composite._KERNELS[channels + 1], cpu_composite._KERNELS[0]
+    assert lanes is not general
+    features = channels + 1
+    outputs = [kernels[0](starts, pairs, width, height, tiles_x, min_transmittance, 2, features)
+               for kernels in (lanes, general)]
+    (image, final, consumed), (image_ref, final_ref, consumed_ref) = outputs
+    np.testing.assert_allclose(image, image_ref, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(final, final_ref, rtol=1e-12, atol=1e-14)
+    assert np.array_equal(consumed, consumed_ref)
+    g = np.random.default_rng(0)
+    upstream, upstream_alpha = g.standard_normal(image.shape), g.standard_normal(final.shape)
+    grads = [kernels[1](starts, pairs, width, height, tiles_x, final_ref, consumed_ref, upstream, upstream_alpha, 2,
+                        features) for kernels in (lanes, general)]
+    scale = np.abs(grads[1]).max(0)
+    assert np.isfinite(grads[0]).all() and (scale > 0).all()
+    np.testing.assert_allclose(grads[0], grads[1], rtol=0, atol=1e-11 * scale.max())
+    assert (np.abs(grads[0] - grads[1]) <= 1e-11 * scale).all()  # every column to rounding, not only the largest
 
 
 def test_depth_order_is_a_stable_sort_with_ties_in_index_order():

@@ -24,9 +24,11 @@ Organised as gsplat's CUDA kernels are, for CPU threads instead of thread blocks
   into consecutive rows, so every pass reads in sequence; the random gathers happen in two
   parallel copies, where the loads are independent.
 
-Per-pair arithmetic is float64 whatever the input dtype (scalar code: it costs no more than
-float32 here and keeps the 1/255 threshold and the transmittance product exact to rounding).
-Formulas and thresholds are those of :mod:`.composite` (see there for the derivation).
+Per-pair arithmetic is float64 whatever the input dtype (it keeps the 1/255 threshold and the
+transmittance product exact to rounding). Formulas and thresholds are those of :mod:`.composite`
+(see there for the derivation). With two or four feature columns (a grayscale or RGB colour plus
+depth: every render of the fit) the compositing runs as :mod:`.cpu_lanes`' kernels, the same
+arithmetic vectorised across a tile row; the general ones here take any other count.
 
 Pure numpy in, numpy out; no torch. Compiled on first use and cached on disk (``cache=True``:
 next to this file, or in numba's user cache directory when the package is read-only).
@@ -38,22 +40,15 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .cpu_lanes import LANE_KERNELS
+from .cpu_tile_math import (A, B, C, EA, EB, EC, EXPONENT_RANGE, FEATS, MX, MY, O, QMAX, TILE, X0, X1, Y0, Y1,
+                            conic_terms, falloff_start, load_pair, quadratic, tile_rect)
 from .project import ALPHA_MAX, ALPHA_MIN
 
 __all__ = ["TILE", "bin_tiles", "composite_backward", "composite_forward", "gather_pairs", "prepare", "reduce_pairs"]
 
-TILE = 16
-"""Tile side in pixels: 256 pixels per tile keep a tile's state in L1 and amortise the list walk."""
 _EDGE = 1e-6
 """Ellipse crossings are widened by this many pixels: rounding never drops a pixel the alpha test keeps."""
-
-
-# Columns of a Gaussian's record (one row per drawn Gaussian, front to back, then one per tile pair).
-MX, MY, A, B, C, O, QMAX, EA, EB, EC, X0, Y0, X1, Y1 = range(14)
-FEATS = 14
-_EXPONENT_RANGE = 600.0
-"""The incremental falloff (:func:`_falloff_start`) is used when every exponent it involves stays
-within this of zero over the Gaussian's box, so that no factor under- or overflows float64."""
 
 
 def prepare(order, means2d, conics, opacities, boxes, feats):
@@ -61,7 +56,7 @@ def prepare(order, means2d, conics, opacities, boxes, feats):
     dtype: mx, my, a, b, c, o; q_max, the largest q = d^T conic d at which o exp(-q/2) still
     reaches 1/255 (a hair wider, as in :func:`.project.footprint_boxes`; -1 when it never does);
     exp(-a), exp(-b), exp(-c), the falloff's second-difference factors (all 0 where the falloff
-    must be evaluated per pixel, see :func:`_falloff_start`); the inclusive pixel box x0, y0, x1,
+    must be evaluated per pixel, see :func:`falloff_start`); the inclusive pixel box x0, y0, x1,
     y1; the features. Later passes read records in sequence instead of gathering from five arrays
     per list entry.
 
@@ -87,11 +82,11 @@ def _records(means2d, conics, opacities, boxes, feats):
         for cx in (boxes[g, 0], boxes[g, 2]):
             for cy in (boxes[g, 1], boxes[g, 3]):
                 dx, dy = cx - mx, cy - my
-                q = _quadratic(mx, my, a, b, c, cx, cy)
+                q = quadratic(mx, my, a, b, c, cx, cy)
                 step_x = a * (2.0 * dx + 1.0) + 2.0 * b * dy
                 step_y = c * (2.0 * dy + 1.0) + 2.0 * b * dx
                 largest = max(largest, abs(q), abs(step_x), abs(step_y), abs(a), abs(b), abs(c))
-        incremental = largest < _EXPONENT_RANGE
+        incremental = largest < EXPONENT_RANGE
         records[g, EA] = math.exp(-a) if incremental else 0.0
         records[g, EB] = math.exp(-b) if incremental else 0.0
         records[g, EC] = math.exp(-c) if incremental else 0.0
@@ -100,36 +95,6 @@ def _records(means2d, conics, opacities, boxes, feats):
         for f in range(n_feats):
             records[g, FEATS + f] = feats[g, f]
     return records
-
-
-@njit(cache=True, inline="always")
-def _load_pair(rec, feat, tx0, ty0, tx1, ty1):
-    """A tile pair's record: ``(mx, my, a, b, c, o, exp(-a), exp(-b), exp(-c), x0, y0, x1, y1)`` with
-    the Gaussian's pixel box clipped to the tile ``[tx0, tx1] x [ty0, ty1]``; its features into ``feat``."""
-    for f in range(feat.shape[0]):
-        feat[f] = rec[FEATS + f]
-    return (float(rec[MX]), float(rec[MY]), float(rec[A]), float(rec[B]), float(rec[C]), float(rec[O]),
-            float(rec[EA]), float(rec[EB]), float(rec[EC]), max(tx0, int(rec[X0])), max(ty0, int(rec[Y0])),
-            min(tx1, int(rec[X1])), min(ty1, int(rec[Y1])))
-
-
-@njit(cache=True, inline="always")
-def _quadratic(mx: float, my: float, a: float, b: float, c: float, x: int, y: int) -> float:
-    """q = d^T conic d at pixel (x, y), d = pixel - mean."""
-    dx, dy = x - mx, y - my
-    return dx * (a * dx + 2.0 * b * dy) + c * dy * dy
-
-
-@njit(cache=True, inline="always")
-def _falloff_start(mx: float, my: float, a: float, b: float, c: float, x: int, y: int):
-    """At pixel (x, y): ``(falloff, ratio_x, ratio_y)`` = exp(-q / 2), exp(-(q(x + 1, y) - q) / 2),
-    exp(-(q(x, y + 1) - q) / 2). From there the falloff of every pixel of a block follows by
-    products: along a row falloff *= ratio_x, ratio_x *= exp(-a); down a column falloff *= ratio_y,
-    ratio_y *= exp(-c), and the row's first ratio_x *= exp(-b): three exps per (tile, Gaussian)
-    pair instead of one per pixel, exact up to float64 rounding over a tile's 16 + 16 steps."""
-    dx, dy = x - mx, y - my
-    return (math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0)), math.exp(-0.5 * (a * (2.0 * dx + 1.0) + 2.0 * b * dy)),
-            math.exp(-0.5 * (c * (2.0 * dy + 1.0) + 2.0 * b * dx)))
 
 
 @njit(cache=True, inline="always")
@@ -219,164 +184,154 @@ def gather_pairs(records, ranks):
     return pairs
 
 
-@njit(cache=True, inline="always")
-def _tile_rect(t, tiles_x, width, height):
-    x0, y0 = (t % tiles_x) * TILE, (t // tiles_x) * TILE
-    return x0, y0, min(x0 + TILE, width) - 1, min(y0 + TILE, height) - 1
-
-
-def _compositing_kernels(features: int):
-    """:func:`composite_forward` and :func:`composite_backward` compiled for ``features`` feature
-    columns (0: any count, read from the pairs). A count known when compiling lets the feature loops
-    be unrolled and kept in registers: 20 % off the forward at 200k Gaussians (numba caches each
-    count's kernels apart)."""
-
-    @njit(cache=True, parallel=True)
-    def forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks):
-        """:func:`composite_forward`."""
-        n_feats = features if features > 0 else pairs.shape[1] - FEATS
-        image = np.zeros((height, width, n_feats))
-        final = np.ones((height, width))
-        consumed = np.zeros((height, width), np.int32)
-        num_tiles = starts.shape[0] - 1
-        for chunk in prange(chunks):
-            trans = np.empty((TILE, TILE))
-            acc = np.empty((TILE, TILE, n_feats))
-            used = np.empty((TILE, TILE), np.int32)
-            feat = np.empty(n_feats)
-            for t in range(chunk, num_tiles, chunks):
-                first, end = starts[t], starts[t + 1]
-                if first == end:
-                    continue
-                tx0, ty0, tx1, ty1 = _tile_rect(t, tiles_x, width, height)
-                trans[:] = 1.0
-                acc[:] = 0.0
-                used[:] = end - first  # a pixel that never stops walks the whole list
-                alive = (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
-                for j in range(first, end):
-                    mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _load_pair(pairs[j], feat, tx0, ty0, tx1, ty1)
-                    row_falloff, row_ratio, ratio_y = _falloff_start(mx, my, a, b, c, bx0, by0)
-                    for y in range(by0, by1 + 1):
-                        falloff, ratio = row_falloff, row_ratio
-                        py = y - ty0
-                        for x in range(bx0, bx1 + 1):
-                            if ea == 0.0:  # outside the incremental range: one exp per pixel
-                                falloff = math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0))
-                            raw = o * falloff
-                            falloff *= ratio
-                            ratio *= ea
-                            px = x - tx0
-                            if raw < ALPHA_MIN or trans[py, px] < min_transmittance:
-                                continue
-                            alpha = min(raw, ALPHA_MAX)
-                            weight = alpha * trans[py, px]
-                            for f in range(n_feats):
-                                acc[py, px, f] += weight * feat[f]
-                            trans[py, px] *= 1.0 - alpha
-                            if trans[py, px] < min_transmittance:
-                                used[py, px] = j - first + 1
-                                alive -= 1
-                        row_falloff *= ratio_y
-                        ratio_y *= ec
-                        row_ratio *= eb
-                    if alive == 0:
-                        break
-                for y in range(ty0, ty1 + 1):
-                    for x in range(tx0, tx1 + 1):
-                        final[y, x] = trans[y - ty0, x - tx0]
-                        consumed[y, x] = used[y - ty0, x - tx0]
+@njit(cache=True, parallel=True)
+def _general_forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks, features):
+    """:func:`composite_forward` for any feature count, in scalar code (``features`` as the vectorised kernels take
+    it; read from the pairs here). Two and four feature columns take :mod:`.cpu_lanes`' kernels instead; the tests
+    check those against these."""
+    n_feats = pairs.shape[1] - FEATS
+    image = np.zeros((height, width, n_feats))
+    final = np.ones((height, width))
+    consumed = np.zeros((height, width), np.int32)
+    num_tiles = starts.shape[0] - 1
+    for chunk in prange(chunks):
+        trans = np.empty((TILE, TILE))
+        acc = np.empty((TILE, TILE, n_feats))
+        used = np.empty((TILE, TILE), np.int32)
+        feat = np.empty(n_feats)
+        for t in range(chunk, num_tiles, chunks):
+            first, end = starts[t], starts[t + 1]
+            if first == end:
+                continue
+            tx0, ty0, tx1, ty1 = tile_rect(t, tiles_x, width, height)
+            trans[:] = 1.0
+            acc[:] = 0.0
+            used[:] = end - first  # a pixel that never stops walks the whole list
+            alive = (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
+            for j in range(first, end):
+                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = load_pair(pairs[j], feat, tx0, ty0, tx1, ty1)
+                row_falloff, row_ratio, ratio_y = falloff_start(mx, my, a, b, c, bx0, by0)
+                for y in range(by0, by1 + 1):
+                    falloff, ratio = row_falloff, row_ratio
+                    py = y - ty0
+                    for x in range(bx0, bx1 + 1):
+                        if ea == 0.0:  # outside the incremental range: one exp per pixel
+                            falloff = math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
+                        raw = o * falloff
+                        falloff *= ratio
+                        ratio *= ea
+                        px = x - tx0
+                        if raw < ALPHA_MIN or trans[py, px] < min_transmittance:
+                            continue
+                        alpha = min(raw, ALPHA_MAX)
+                        weight = alpha * trans[py, px]
                         for f in range(n_feats):
-                            image[y, x, f] = acc[y - ty0, x - tx0, f]
-        return image, final, consumed
+                            acc[py, px, f] += weight * feat[f]
+                        trans[py, px] *= 1.0 - alpha
+                        if trans[py, px] < min_transmittance:
+                            used[py, px] = j - first + 1
+                            alive -= 1
+                    row_falloff *= ratio_y
+                    ratio_y *= ec
+                    row_ratio *= eb
+                if alive == 0:
+                    break
+            for y in range(ty0, ty1 + 1):
+                for x in range(tx0, tx1 + 1):
+                    final[y, x] = trans[y - ty0, x - tx0]
+                    consumed[y, x] = used[y - ty0, x - tx0]
+                    for f in range(n_feats):
+                        image[y, x, f] = acc[y - ty0, x - tx0, f]
+    return image, final, consumed
 
-    @njit(cache=True, parallel=True, fastmath={"contract"})
-    def backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
-        """:func:`composite_backward`."""
-        n_feats = features if features > 0 else pairs.shape[1] - FEATS
-        pair_grads = np.zeros((pairs.shape[0], 6 + n_feats))
-        num_tiles = starts.shape[0] - 1
-        for chunk in prange(chunks):
-            trans = np.empty((TILE, TILE))
-            behind = np.empty((TILE, TILE, n_feats))
-            upstream = np.empty((TILE, TILE, n_feats))
-            used = np.empty((TILE, TILE), np.int32)
-            opacity_up = np.empty((TILE, TILE))  # dL/d(1 - T_final) * T_final per pixel
-            feat = np.empty(n_feats)
-            local_feat = np.empty(n_feats)  # the pair's feature gradients, summed over its pixels
-            for t in range(chunk, num_tiles, chunks):
-                first, end = starts[t], starts[t + 1]
-                if first == end:
-                    continue
-                tx0, ty0, tx1, ty1 = _tile_rect(t, tiles_x, width, height)
-                deepest = 0
-                for y in range(ty0, ty1 + 1):
-                    for x in range(tx0, tx1 + 1):
-                        py, px = y - ty0, x - tx0
-                        trans[py, px] = final[y, x]
-                        opacity_up[py, px] = grad_alpha_image[y, x] * final[y, x]
-                        used[py, px] = consumed[y, x]
-                        deepest = max(deepest, consumed[y, x])
+@njit(cache=True, parallel=True, fastmath={"contract"})
+def _general_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
+                      features):
+    """:func:`composite_backward` for any feature count, in scalar code (see :func:`_general_forward`)."""
+    n_feats = pairs.shape[1] - FEATS
+    pair_grads = np.zeros((pairs.shape[0], 6 + n_feats))
+    num_tiles = starts.shape[0] - 1
+    for chunk in prange(chunks):
+        trans = np.empty((TILE, TILE))
+        behind = np.empty((TILE, TILE, n_feats))
+        upstream = np.empty((TILE, TILE, n_feats))
+        used = np.empty((TILE, TILE), np.int32)
+        opacity_up = np.empty((TILE, TILE))  # dL/d(1 - T_final) * T_final per pixel
+        feat = np.empty(n_feats)
+        local_feat = np.empty(n_feats)  # the pair's feature gradients, summed over its pixels
+        for t in range(chunk, num_tiles, chunks):
+            first, end = starts[t], starts[t + 1]
+            if first == end:
+                continue
+            tx0, ty0, tx1, ty1 = tile_rect(t, tiles_x, width, height)
+            deepest = 0
+            for y in range(ty0, ty1 + 1):
+                for x in range(tx0, tx1 + 1):
+                    py, px = y - ty0, x - tx0
+                    trans[py, px] = final[y, x]
+                    opacity_up[py, px] = grad_alpha_image[y, x] * final[y, x]
+                    used[py, px] = consumed[y, x]
+                    deepest = max(deepest, consumed[y, x])
+                    for f in range(n_feats):
+                        behind[py, px, f] = 0.0
+                        upstream[py, px, f] = grad_image[y, x, f]
+            for k in range(deepest - 1, -1, -1):
+                g_mx = g_my = g_a = g_b = g_c = g_o = 0.0
+                for f in range(n_feats):
+                    local_feat[f] = 0.0
+                mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = load_pair(pairs[first + k], feat, tx0, ty0,
+                                                                                tx1, ty1)
+                row_falloff, row_ratio, ratio_y = falloff_start(mx, my, a, b, c, bx0, by0)
+                for y in range(by0, by1 + 1):
+                    falloff, ratio = row_falloff, row_ratio
+                    row_falloff *= ratio_y
+                    ratio_y *= ec
+                    row_ratio *= eb
+                    dy = y - my
+                    py = y - ty0
+                    for x in range(bx0, bx1 + 1):
+                        dx = x - mx
+                        if ea == 0.0:  # outside the incremental range: one exp per pixel
+                            falloff = math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
+                        here_falloff = falloff
+                        falloff *= ratio
+                        ratio *= ea
+                        px = x - tx0
+                        raw = o * here_falloff
+                        if k >= used[py, px] or raw < ALPHA_MIN:
+                            continue
+                        alpha = min(raw, ALPHA_MAX)
+                        inverse = 1.0 / (1.0 - alpha)
+                        before = trans[py, px] * inverse  # T_k, the transmittance in front of Gaussian k
+                        trans[py, px] = before
+                        weight = alpha * before
+                        grad_alpha = opacity_up[py, px] * inverse
                         for f in range(n_feats):
-                            behind[py, px, f] = 0.0
-                            upstream[py, px, f] = grad_image[y, x, f]
-                for k in range(deepest - 1, -1, -1):
-                    g_mx = g_my = g_a = g_b = g_c = g_o = 0.0
-                    for f in range(n_feats):
-                        local_feat[f] = 0.0
-                    mx, my, a, b, c, o, ea, eb, ec, bx0, by0, bx1, by1 = _load_pair(pairs[first + k], feat, tx0, ty0,
-                                                                                    tx1, ty1)
-                    row_falloff, row_ratio, ratio_y = _falloff_start(mx, my, a, b, c, bx0, by0)
-                    for y in range(by0, by1 + 1):
-                        falloff, ratio = row_falloff, row_ratio
-                        row_falloff *= ratio_y
-                        ratio_y *= ec
-                        row_ratio *= eb
-                        dy = y - my
-                        py = y - ty0
-                        for x in range(bx0, bx1 + 1):
-                            dx = x - mx
-                            if ea == 0.0:  # outside the incremental range: one exp per pixel
-                                falloff = math.exp(-0.5 * max(_quadratic(mx, my, a, b, c, x, y), 0.0))
-                            here_falloff = falloff
-                            falloff *= ratio
-                            ratio *= ea
-                            px = x - tx0
-                            raw = o * here_falloff
-                            if k >= used[py, px] or raw < ALPHA_MIN:
-                                continue
-                            alpha = min(raw, ALPHA_MAX)
-                            inverse = 1.0 / (1.0 - alpha)
-                            before = trans[py, px] * inverse  # T_k, the transmittance in front of Gaussian k
-                            trans[py, px] = before
-                            weight = alpha * before
-                            grad_alpha = opacity_up[py, px] * inverse
-                            for f in range(n_feats):
-                                up = upstream[py, px, f]
-                                local_feat[f] += weight * up
-                                grad_alpha += (feat[f] * before - behind[py, px, f] * inverse) * up
-                                behind[py, px, f] += feat[f] * weight
-                            if raw >= ALPHA_MAX:  # clamped: alpha does not depend on the parameters
-                                continue
-                            g_o += grad_alpha * here_falloff
-                            if _quadratic(mx, my, a, b, c, x, y) <= 0.0:  # q clamped at 0 (rounding only)
-                                continue
-                            grad_q = -0.5 * grad_alpha * raw
-                            g_mx -= 2.0 * grad_q * (a * dx + b * dy)
-                            g_my -= 2.0 * grad_q * (b * dx + c * dy)
-                            g_a += grad_q * dx * dx
-                            g_b += 2.0 * grad_q * dx * dy
-                            g_c += grad_q * dy * dy
-                    local = pair_grads[first + k]
-                    local[0], local[1], local[2], local[3], local[4], local[5] = g_mx, g_my, g_a, g_b, g_c, g_o
-                    for f in range(n_feats):
-                        local[6 + f] = local_feat[f]
-        return pair_grads
-
-    return forward, backward
+                            up = upstream[py, px, f]
+                            local_feat[f] += weight * up
+                            grad_alpha += (feat[f] * before - behind[py, px, f] * inverse) * up
+                            behind[py, px, f] += feat[f] * weight
+                        if raw >= ALPHA_MAX:  # clamped: alpha does not depend on the parameters
+                            continue
+                        g_o += grad_alpha * here_falloff
+                        if quadratic(mx, my, a, b, c, x, y) <= 0.0:  # q clamped at 0 (rounding only)
+                            continue
+                        t_mx, t_my, t_a, t_b, t_c = conic_terms(-0.5 * grad_alpha * raw, a, b, c, dx, dy)
+                        g_mx += t_mx
+                        g_my += t_my
+                        g_a += t_a
+                        g_b += t_b
+                        g_c += t_c
+                local = pair_grads[first + k]
+                local[0], local[1], local[2], local[3], local[4], local[5] = g_mx, g_my, g_a, g_b, g_c, g_o
+                for f in range(n_feats):
+                    local[6 + f] = local_feat[f]
+    return pair_grads
 
 
-_KERNELS = {features: _compositing_kernels(features) for features in (2, 4, 0)}
-"""The compositing kernels by feature count: a grayscale or RGB colour plus depth, and any other."""
+_KERNELS = {**LANE_KERNELS, 0: (_general_forward, _general_backward)}
+"""The compositing kernels by feature count: a grayscale or RGB colour plus depth (vectorised across tile rows,
+:mod:`.cpu_lanes`), and any other (the general kernels above, the lanes' reference in the tests)."""
 
 
 def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks):
@@ -386,8 +341,9 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
     did; only the entries it composited matter to the backward, which re-tests the same alpha
     threshold). The accumulated opacity is ``1 - final``: no feature column of ones is needed.
     Tiles are dealt to ``chunks`` interleaved chunks, one parallel task each."""
-    forward, _ = _KERNELS.get(pairs.shape[1] - FEATS, _KERNELS[0])
-    return forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks)
+    features = pairs.shape[1] - FEATS
+    forward, _ = _KERNELS.get(features, _KERNELS[0])
+    return forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks, features)
 
 
 def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
@@ -395,8 +351,10 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
     ``[M, 6 + F]`` float64, columns (mx, my, a, b, c, opacity, feats...), rows as ``pairs`` (see
     :func:`reduce_pairs`). d(1 - T_final)/d alpha_k = T_final / (1 - alpha_k). Products are
     contracted into fused multiply-adds (``fastmath={"contract"}``: rounding only, ~10 % faster)."""
-    _, backward = _KERNELS.get(pairs.shape[1] - FEATS, _KERNELS[0])
-    return backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks)
+    features = pairs.shape[1] - FEATS
+    _, backward = _KERNELS.get(features, _KERNELS[0])
+    return backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
+                    features)
 
 
 @njit(cache=True, parallel=True)
