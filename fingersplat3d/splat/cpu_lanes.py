@@ -21,9 +21,9 @@ row's pixels with no branch and no call in it.
   (``error_model="numpy"``: 1 - alpha >= 0.01 by the clamp), and the backward's sums over a row are
   vectorised reductions (``fastmath`` reassociation: the same sums in another order).
 * **Narrow boxes walk fewer lanes.** A Gaussian whose box spans at most ``NARROW`` (4) columns of the
-  tile walks only those 4 lanes, forward and back; walking back, one of at most ``WINDOW`` (8) walks 8;
-  any other the whole row of 16. On the bench's fitted finger the boxes are 4 columns wide at the median,
-  95 % at most 8. (8 lanes forward came out slower than 16.)
+  tile walks only those 4 lanes, forward and back; any other the whole row of 16. On the bench's fitted
+  finger the boxes are 4 columns wide at the median. (A tier of 8 lanes came out slower forward, and
+  walking back 2 % faster for 6 s more compiling.)
 * **Compiled once.** The two feature counts are two closures whose only free variable is the count (a
   constant to numba); the helpers are module functions called with constant lane counts. A closure that
   captured the helpers themselves was compiled again by every process: numba keys its disk cache on the
@@ -44,12 +44,11 @@ from numba import njit, prange
 from .cpu_tile_math import TILE, conic_terms, falloff_start, load_pair, quadratic, tile_rect
 from .project import ALPHA_MAX, ALPHA_MIN
 
-__all__ = ["LANE_KERNELS", "NARROW", "WINDOW"]
+__all__ = ["LANE_KERNELS", "NARROW"]
 
-NARROW, WINDOW = 4, 8
-"""Lanes walked for a Gaussian whose box spans at most this many of the tile's columns: ``NARROW`` (half the tile
-pairs of a fitted finger) forward and back, ``WINDOW`` (95 %) walking back only (forward it came out slower than
-the whole row). Any other box walks the whole row of ``TILE``."""
+NARROW = 4
+"""Lanes walked for a Gaussian whose box spans at most this many of the tile's columns (half the tile pairs of a
+fitted finger); any other box walks the whole row of ``TILE``."""
 PLANE = (TILE + 1) * TILE
 """One per-pixel quantity of a tile, row after row, and one row more (the falloff lanes of the row below the last)."""
 TRANS, FALL, STEP, OPACITY_UP, STOPPED = (k * PLANE for k in range(5))
@@ -287,13 +286,10 @@ def _lane_kernels(features: int):
                                                                                    tx0, ty0, tx1, ty1)
                     if ea != 0.0:
                         _lanes_start(buf, mx, my, a, b, c, ea, eb, bx0, by0, bx1, tx0, ty0)
-                    narrow, low = _first_lane(bx0, bx1, tx0, NARROW), _first_lane(bx0, bx1, tx0, WINDOW)
-                    if narrow >= 0:
+                    low = _first_lane(bx0, bx1, tx0, NARROW)
+                    if low >= 0:
                         _pair_backward(buf, sums, k, feat, mx, my, a, b, c, o, ea, ec, bx0, by0, bx1, by1, tx0, ty0,
-                                       narrow, NARROW, four)
-                    elif low >= 0:
-                        _pair_backward(buf, sums, k, feat, mx, my, a, b, c, o, ea, ec, bx0, by0, bx1, by1, tx0, ty0,
-                                       low, WINDOW, four)
+                                       low, NARROW, four)
                     else:
                         _pair_backward(buf, sums, k, feat, mx, my, a, b, c, o, ea, ec, bx0, by0, bx1, by1, tx0, ty0, 0,
                                        TILE, four)

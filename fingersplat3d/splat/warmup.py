@@ -1,7 +1,7 @@
 """Compile the CPU rasterizer's numba kernels ahead of the work, and say so when that takes a while.
 
 The kernels (:mod:`.cpu_composite`, :mod:`.cpu_project`) are compiled by numba on their first call and
-cached on disk beside the modules, so only the first run after an install pays (~30 s on 2 cores).
+cached on disk beside the modules, so only the first run after an install pays (~50 s on 2 cores).
 ``tools/install.sh`` runs ``python3 -m fingersplat3d.splat.warmup`` so that a fresh install compiles them
 once, up front. Otherwise, the splat stage calls :func:`ensure_compiled` before its first render: where no
 cache is found it first tells the user what the wait is.
@@ -17,7 +17,7 @@ __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
 KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
                 "cpu_project": ("project_forward", "project_backward")}
-MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~30 s; cached on disk)"
+MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~50 s; cached on disk)"
 _warm = False
 
 
