@@ -253,7 +253,6 @@ def _lane_kernels(features: int):
                             image[y, x, f] = buf[acc + f * PLANE + pixel]
         return image, final, consumed
 
-
     @njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract", "reassoc"})
     def backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
                  features_given):
