@@ -142,17 +142,15 @@ def test_vectorised_kernels_equal_the_general_ones_in_float64(channels, min_tran
     assert (records[:, EA] == 0.0).any()  # the per-pixel falloff is exercised
     lanes, general = cpu_composite._KERNELS[channels + 1], cpu_composite._KERNELS[0]
     assert lanes is not general
-    features = channels + 1
-    outputs = [kernels[0](starts, pairs, width, height, tiles_x, min_transmittance, 2, features)
-               for kernels in (lanes, general)]
+    outputs = [kernels[0](starts, pairs, width, height, tiles_x, min_transmittance, 2) for kernels in (lanes, general)]
     (image, final, consumed), (image_ref, final_ref, consumed_ref) = outputs
     np.testing.assert_allclose(image, image_ref, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(final, final_ref, rtol=1e-12, atol=1e-14)
     assert np.array_equal(consumed, consumed_ref)
     g = np.random.default_rng(0)
     upstream, upstream_alpha = g.standard_normal(image.shape), g.standard_normal(final.shape)
-    grads = [kernels[1](starts, pairs, width, height, tiles_x, final_ref, consumed_ref, upstream, upstream_alpha, 2,
-                        features) for kernels in (lanes, general)]
+    grads = [kernels[1](starts, pairs, width, height, tiles_x, final_ref, consumed_ref, upstream, upstream_alpha, 2)
+             for kernels in (lanes, general)]
     scale = np.abs(grads[1]).max(0)
     assert np.isfinite(grads[0]).all() and (scale > 0).all()
     np.testing.assert_allclose(grads[0], grads[1], rtol=0, atol=1e-11 * scale.max())

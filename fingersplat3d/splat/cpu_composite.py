@@ -21,8 +21,9 @@ Organised as gsplat's CUDA kernels are, for CPU threads instead of thread blocks
   (tile, Gaussian) pair's row, and a last pass sums each Gaussian's pairs (no atomics, no
   per-thread buffers, the same result for any thread count).
 * **Memory order.** Gaussians are packed once into records in depth order and the tile lists
-  into consecutive rows, so every pass reads in sequence; the random gathers happen in two
-  parallel copies, where the loads are independent.
+  into consecutive rows, so every pass reads in sequence; the random accesses happen in two
+  parallel passes, where they are independent: each record written to its row, and the tile
+  lists gathered from the records.
 
 Per-pair arithmetic is float64 whatever the input dtype (it keeps the 1/255 threshold and the
 transmittance product exact to rounding). Formulas and thresholds are those of :mod:`.composite`
@@ -189,10 +190,9 @@ def gather_pairs(records, ranks):
 
 
 @njit(cache=True, parallel=True)
-def _general_forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks, features):
-    """:func:`composite_forward` for any feature count, in scalar code (``features`` as the vectorised kernels take
-    it; read from the pairs here). Two and four feature columns take :mod:`.cpu_lanes`' kernels instead; the tests
-    check those against these."""
+def _general_forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks):
+    """:func:`composite_forward` for any feature count, in scalar code. Two and four feature columns take
+    :mod:`.cpu_lanes`' kernels instead; the tests check those against these."""
     n_feats = pairs.shape[1] - FEATS
     image = np.zeros((height, width, n_feats))
     final = np.ones((height, width))
@@ -249,8 +249,7 @@ def _general_forward(starts, pairs, width, height, tiles_x, min_transmittance, c
     return image, final, consumed
 
 @njit(cache=True, parallel=True, fastmath={"contract"})
-def _general_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
-                      features):
+def _general_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
     """:func:`composite_backward` for any feature count, in scalar code (see :func:`_general_forward`)."""
     n_feats = pairs.shape[1] - FEATS
     pair_grads = np.zeros((pairs.shape[0], 6 + n_feats))
@@ -345,9 +344,8 @@ def composite_forward(starts, pairs, width, height, tiles_x, min_transmittance, 
     did; only the entries it composited matter to the backward, which re-tests the same alpha
     threshold). The accumulated opacity is ``1 - final``: no feature column of ones is needed.
     Tiles are dealt to ``chunks`` interleaved chunks, one parallel task each."""
-    features = pairs.shape[1] - FEATS
-    forward, _ = _KERNELS.get(features, _KERNELS[0])
-    return forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks, features)
+    forward, _ = _KERNELS.get(pairs.shape[1] - FEATS, _KERNELS[0])
+    return forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks)
 
 
 def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
@@ -355,10 +353,8 @@ def composite_backward(starts, pairs, width, height, tiles_x, final, consumed, g
     ``[M, 6 + F]`` float64, columns (mx, my, a, b, c, opacity, feats...), rows as ``pairs`` (see
     :func:`reduce_pairs`). d(1 - T_final)/d alpha_k = T_final / (1 - alpha_k). Products are
     contracted into fused multiply-adds (``fastmath={"contract"}``: rounding only, ~10 % faster)."""
-    features = pairs.shape[1] - FEATS
-    _, backward = _KERNELS.get(features, _KERNELS[0])
-    return backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
-                    features)
+    _, backward = _KERNELS.get(pairs.shape[1] - FEATS, _KERNELS[0])
+    return backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks)
 
 
 @njit(cache=True, parallel=True)

@@ -205,13 +205,13 @@ def _pair_backward(buf, sums, k, feat, mx, my, a, b, c, o, ea, ec, bx0, by0, bx1
 
 def _lane_kernels(features: int):
     """``(forward, backward)`` for ``features`` (2 or 4) feature columns, with the signatures of
-    :mod:`.cpu_composite`'s general kernels (``features_given``: the pairs' count, the same). The count is the
+    :mod:`.cpu_composite`'s general kernels (the pairs carry ``features`` feature columns). The count is the
     closures' one free variable, so numba compiles it in as a constant (and caches each count's kernels apart);
     the helpers are module globals, given their lane counts as constants."""
     four = features == 4
 
     @njit(cache=True, parallel=True, error_model="numpy")
-    def forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks, features_given):
+    def forward(starts, pairs, width, height, tiles_x, min_transmittance, chunks):
         acc = FORWARD_PLANES * PLANE
         image = np.zeros((height, width, features))
         final = np.ones((height, width))
@@ -254,8 +254,7 @@ def _lane_kernels(features: int):
         return image, final, consumed
 
     @njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract", "reassoc"})
-    def backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks,
-                 features_given):
+    def backward(starts, pairs, width, height, tiles_x, final, consumed, grad_image, grad_alpha_image, chunks):
         upstream = (BACKWARD_PLANES + features) * PLANE
         pair_grads = np.zeros((pairs.shape[0], 6 + features))
         num_tiles = starts.shape[0] - 1
