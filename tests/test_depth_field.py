@@ -28,3 +28,20 @@ def test_bending_of_linear_coefficients_is_zero_and_of_a_bump_is_not():
     bump = np.zeros(field.size)
     bump[field.size // 2] = 1.0
     assert np.abs((bump[triples] * weights).sum(1)).max() == 2.0
+
+
+def test_the_knots_count_across_the_finger_on_a_crop_shorter_along_it_than_across():
+    """A finger band the frame cuts at both ends, 60 px along it and 160 px across: the knots are spaced by its width
+    (the widest disc), not by its box's short side (its length), which would make its field four times as dense; a
+    whole finger keeps its box's short side exactly (its width within CROP_WIDER)."""
+    from fingersplat3d.align.solve.depth_field import CROP_WIDER
+
+    band = np.zeros((300, 60), bool)
+    band[70:230] = True  # rows across the finger, cut by the left and right borders
+    crop = FieldGrid.covering(band, 8)
+    assert abs(crop.spacing - 159 / 8) <= 1.0
+    finger = np.zeros((200, 400), bool)
+    v, u = np.mgrid[:200, :400]
+    finger[(np.abs(v - 100) <= 50) & (u >= 80) | ((u - 80) ** 2 + (v - 100) ** 2 <= 50 ** 2)] = True
+    whole = FieldGrid.covering(finger, 8)
+    assert whole.spacing == 100 / 8 and CROP_WIDER > 1.0

@@ -158,3 +158,15 @@ def test_local_quadratic_is_scipys_savgol_filter(window, count):
 
     values = np.random.default_rng(window).normal(size=count).cumsum() + np.linspace(0, 5, count) ** 2
     assert np.allclose(local_quadratic(values, window), savgol_filter(values, window, 2, mode="interp"), atol=1e-9)
+
+
+def test_the_widest_disc_is_the_fingers_width_whether_the_frame_cuts_it_or_not():
+    """widest_disc: a band the frame cuts at both ends, shorter along the finger (its box's short side) than it is
+    wide, reads its width; a capsule whole but for its cut end reads its diameter; nothing and everything read 0."""
+    from fingersplat3d.segment.silhouette import widest_disc
+
+    short = crop(rows=90, cols=300, top=60, bottom=60)  # 90 rows along the finger, 121 columns across it
+    assert abs(widest_disc(short) - 121) <= 3
+    assert abs(widest_disc(capsule(radius=50)) - 101) <= 3
+    assert abs(widest_disc(short.T) - widest_disc(short)) <= 1e-9  # no preferred direction
+    assert widest_disc(np.zeros((20, 20), bool)) == 0.0 and widest_disc(np.ones((20, 20), bool)) == 0.0

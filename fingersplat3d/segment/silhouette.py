@@ -28,7 +28,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 __all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
-           "silhouette_frame", "orient_frames", "local_quadratic", "TIP_BASES"]
+           "silhouette_frame", "orient_frames", "local_quadratic", "widest_disc", "TIP_BASES"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -76,6 +76,16 @@ def principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray
 CUT_DOMINANCE = 2.0
 """An image edge cuts the finger (:func:`finger_axis`) when it holds this many times as many of the mask's pixels as
 each edge that does not."""
+
+
+def widest_disc(mask: np.ndarray) -> float:
+    """Diameter (pixels) of the widest disc inside ``mask``, the image border not counting as its edge: the finger's
+    width, whether the frame cuts it or not (on a crop cut at both ends shorter along the finger than across it, the
+    mask's box is shorter than the finger is wide). 0 for an empty mask or one with no edge in the frame."""
+    padded = np.pad(np.asarray(mask, bool), 1, mode="edge").astype(np.uint8)  # the border continues the mask
+    if not padded.any() or padded.all():
+        return 0.0
+    return 2.0 * float(cv2.distanceTransform(padded, cv2.DIST_L2, 5).max())
 
 
 def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,8 @@ of the coefficients) lets the pointmap fill in where no view constrains it.
 
 A field over the box ``(u0, v0, u1, v1)`` with knot ``spacing`` has ``(gy, gx)`` coefficients; a
 point's value is a weighted sum of 4x4 of them, so the basis is stored sparse: 16 coefficient
-indices and weights per point (:class:`FieldBasis`). Pure numpy.
+indices and weights per point (:class:`FieldBasis`). Numpy (the finger's width for the knots: OpenCV's distance
+transform, :func:`~fingersplat3d.segment.silhouette.widest_disc`).
 """
 from __future__ import annotations
 
@@ -15,7 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FieldGrid", "FieldBasis"]
+from ...segment.silhouette import widest_disc
+
+__all__ = ["FieldGrid", "FieldBasis", "CROP_WIDER"]
+
+CROP_WIDER = 1.1
+"""How much wider than its box's short side the widest disc inside a mask must be to set the knots instead: on whole
+fingers the two agree within a pixel or two (the box's side is kept, so their fields are as before); a real capture
+cropped about its centre to 240-440 pixels along the finger, the frame cutting the tip off, reads 1.3-2.4."""
 
 
 @dataclass(frozen=True)
@@ -29,12 +37,17 @@ class FieldGrid:
 
     @classmethod
     def covering(cls, mask: np.ndarray, knots_across: float) -> "FieldGrid":
-        """A grid over the bounding box of ``mask`` with about ``knots_across`` knot intervals across its short side."""
+        """A grid over the bounding box of ``mask`` with about ``knots_across`` knot intervals across the finger: its
+        box's short side, or the widest disc inside it where that is :data:`CROP_WIDER` times wider (a crop shorter
+        along the finger than across it, cut by the frame at both ends, whose box's short side is its length)."""
         rows, cols = np.nonzero(mask)
         if rows.size == 0:
             rows, cols = np.array([0, mask.shape[0] - 1]), np.array([0, mask.shape[1] - 1])
         u0, u1, v0, v1 = float(cols.min()), float(cols.max()), float(rows.min()), float(rows.max())
-        spacing = max(1.0, min(u1 - u0, v1 - v0) / max(knots_across, 1e-9))
+        across, disc = min(u1 - u0, v1 - v0), widest_disc(mask)
+        if disc > CROP_WIDER * across:
+            across = disc
+        spacing = max(1.0, across / max(knots_across, 1e-9))
         shape = (int(np.ceil((v1 - v0) / spacing)) + 3, int(np.ceil((u1 - u0) / spacing)) + 3)
         return cls(u0, v0, spacing, shape)
 
