@@ -398,7 +398,17 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
     if alignment.turn_sensitivity_deg is not None:
         status["turn_sensitivity_deg"] = _per_pair(names, alignment.turn_sensitivity_deg, 2)
         loose = {pair: value for pair, value in status["turn_sensitivity_deg"].items() if value > MAX_TURN_SENSITIVITY_DEG}
-        if loose:
+        probe = alignment.focal_probe
+        if probe is not None:
+            status["focal_probe"] = probe
+        if probe is not None and not probe["held"] and sum(alignment.aligned) >= 3:
+            moved = max(status["turn_sensitivity_deg"].items(), key=lambda item: item[1])
+            _warn(report, "the photos do not hold the focal: the fit slides toward a longer, nearly orthographic one, and a "
+                          f"focal {1 / probe['shorter_share']:.1f} times shorter fits about as well (the loss "
+                          f"{100 * probe['shorter_loss_rise']:+.0f} %), with the turn between {moved[0]} {moved[1]:.1f}° "
+                          "away; seen on crops without the fingertip whose outer views share no skin (real ones: turns up "
+                          "to 19° off): the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
+        elif loose:
             _warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
                   + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
                   f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "

@@ -231,16 +231,20 @@ def test_two_views_keep_the_camera_centres_as_unknowns(capture):
     assert not problem.pivoted
 
 
+def _exact_three(capture):
+    """Exact matches between every two of the capture's three views, their true depths and focal."""
+    rng = np.random.default_rng(0)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03),
+             _exact_pair(capture, 0, 2, rng, tilt=0.03)]
+    return pairs, [v.depth for v in capture.views], capture.views[0].camera.K[0, 0]
+
+
 def test_turn_sensitivity_is_small_where_three_views_pin_the_turns_and_large_for_two(capture):
     """The probe of align/solve/sensitivity.py: three views with exact matches hold their turns while the focal is
     held off (a fraction of a degree); two views, whose turn follows the focal, move by more."""
     from fingersplat3d.align.solve.sensitivity import turn_sensitivity_deg
 
-    rng = np.random.default_rng(0)
-    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03),
-             _exact_pair(capture, 0, 2, rng, tilt=0.03)]
-    depths = [v.depth for v in capture.views]
-    focal = capture.views[0].camera.K[0, 0]
+    pairs, depths, focal = _exact_three(capture)
     config = GlobalAlignConfig()
     three = global_align(depths, focal, pairs, config)
     moves = turn_sensitivity_deg(three, depths, focal, pairs, config)
@@ -248,7 +252,28 @@ def test_turn_sensitivity_is_small_where_three_views_pin_the_turns_and_large_for
     assert np.nanmax(moves) < 1.0
     two = global_align(depths[:2], focal, pairs[:1], config)
     two_moves = turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], config)
-    assert two_moves[0, 1] > 3 * np.nanmax(moves)  # measured 4.1 against 0.62
+    assert two_moves[0, 1] > 3 * np.nanmax(moves)  # measured 11.1 against 0.62 (4.1 before the shorter probe)
     assert turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], GlobalAlignConfig(optimize_focal=False)) is None
     unreached = global_align(depths, focal, pairs[:1], config)  # view 2 has no pair
     assert np.isnan(turn_sensitivity_deg(unreached, depths, focal, pairs[:1], config)[0, 2])
+
+
+def test_the_focal_probe_says_when_the_photos_do_not_hold_the_focal(capture, monkeypatch):
+    """focal_probe: three views with exact matches raise the loss when the focal is held 10 % longer (held, no second
+    probe); two views, whose loss is flat along the focal, are probed shorter too, and that probe's larger move is
+    their sensitivity."""
+    from fingersplat3d.align.solve import sensitivity
+    from fingersplat3d.align.solve.sensitivity import EXCLUDED_LOSS_RISE, FLAT_LOSS_RISE, focal_probe
+
+    pairs, depths, focal = _exact_three(capture)
+    config = GlobalAlignConfig()
+    three = focal_probe(global_align(depths, focal, pairs, config), depths, focal, pairs, config)
+    assert three.held and three.longer_loss_rise > FLAT_LOSS_RISE and three.shorter_share is None  # measured +8.5 %
+    assert three.summary() == {"held": True, "longer_loss_rise": round(three.longer_loss_rise, 4)}
+    two_alignment = global_align(depths[:2], focal, pairs[:1], config)
+    two = focal_probe(two_alignment, depths[:2], focal, pairs[:1], config)
+    assert not two.held and two.longer_loss_rise < FLAT_LOSS_RISE  # measured -0.5 %
+    assert 0.3 < two.shorter_share < 1.0 and two.shorter_loss_rise <= EXCLUDED_LOSS_RISE  # measured 0.73, +9.8 %
+    monkeypatch.setattr(sensitivity, "FLAT_LOSS_RISE", -np.inf)  # the longer probe alone, as before
+    longer = focal_probe(two_alignment, depths[:2], focal, pairs[:1], config)
+    assert longer.held and two.moves[0, 1] > 2 * longer.moves[0, 1]  # measured 11.1 against 4.1

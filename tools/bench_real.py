@@ -1,11 +1,14 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
-                                [--two-views] [--focal-px F]
+                                [--two-views] [--focal-px F] [--crop-tip [SHARE]]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
-table of docs/measurements.md and the machine it ran on.
+table of docs/measurements.md and the machine it ran on. With ``--crop-tip``, each capture is also fused with its
+photos cropped about their centres, the fingertip outside the frame
+(:func:`fingersplat3d.experiments.real_crops.crop_without_tip`, in memory), and the crops' turns are measured against
+the whole captures' rig mean.
 """
 from __future__ import annotations
 
@@ -29,6 +32,23 @@ def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px
     return measure_real(capture, config, leave_one_out=True, two_views=two_views) | {"capture": job.name}
 
 
+def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float | None, share: float) -> dict | None:
+    from fingersplat3d.align.register import RegistrationConfig
+    from fingersplat3d.experiments.real import measure_real
+    from fingersplat3d.experiments.real_crops import crop_without_tip
+    from fingersplat3d.io.jobs import load_job
+    from fingersplat3d.pipeline import FuseConfig
+    from fingersplat3d.scene import Capture
+
+    capture = load_job(job)
+    views = [crop_without_tip(view, share) for view in capture.views]
+    if any(view is None for view in views):
+        return None
+    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
+                        focal_px=focal_px)
+    return measure_real(Capture(views, capture.metadata), config) | {"capture": job.name}
+
+
 def main() -> int:
     from fingersplat3d.eval.machine import machine
     from fingersplat3d.experiments.process import in_fresh_process
@@ -47,6 +67,9 @@ def main() -> int:
     parser.add_argument("--two-views", action="store_true",
                         help="also fuse every pair of views alone and compare its turn with the three-view fuse's")
     parser.add_argument("--focal-px", type=float, help="the cameras' focal in the photos' pixels, kept (fs3d fuse --focal-px)")
+    parser.add_argument("--crop-tip", type=float, nargs="?", const=0.3, metavar="SHARE",
+                        help="also fuse every capture cropped about its centre with the fingertip and SHARE (default 0.3) "
+                             "of the finger's width behind it outside the frame, against the whole captures' rig")
     args = parser.parse_args()
     if not args.data.is_dir():
         print(f"bench_real: {args.data}: no such folder (the real dev captures live in ../shared/data/uwa-real-dev)",
@@ -72,8 +95,25 @@ def main() -> int:
                                                     for k, v in how_sure.items()) + ") against its rig deviation.")
     if args.two_views:
         print("\n" + two_view_table(summary))
+    cropped = []
+    if args.crop_tip is not None:
+        from fingersplat3d.eval.rig_consistency import deviation_against
+        from fingersplat3d.experiments.real_crops import crop_table
+
+        for job in list_jobs([args.data], args.select):
+            record = in_fresh_process(_measure_cropped, job, args.guided_rounds, args.ridge_px, args.focal_px, args.crop_tip)
+            if record is None:
+                print(f"{job.name}: not cropped (no finger found, or its tip too far past the centre)", file=sys.stderr)
+                continue
+            cropped.append(record)
+            print(f"{job.name} cropped: {record['registered']}/3 registered, focal {record['focal']:.0f}", file=sys.stderr)
+        deviations = deviation_against(cropped, records)
+        print(f"\nCropped about the centre, the fingertip and {args.crop_tip:g} of the finger's width outside the frame; "
+              "rig deviation against the whole captures' rig mean:\n")
+        print(crop_table(cropped, deviations))
     if args.json:
-        args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary}, indent=1, default=float))
+        args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary, "cropped": cropped},
+                                        indent=1, default=float))
     return 0
 
 

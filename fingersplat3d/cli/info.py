@@ -66,6 +66,7 @@ def describe_reconstruction(folder: Path) -> dict:
                  "registered": f"{sum(bool(v['registered']) for v in views)} of {len(views)}" if aligned else None,
                  "residual_px": None if alignment.get("residual_px") is None else round(float(alignment["residual_px"]), 3),
                  "units": cameras.units, "scale_mm_per_unit": cameras.scale_mm_per_unit, "points": report.get("points"),
+                 "focal_held_by_photos": (alignment.get("focal_probe") or {}).get("held"),
                  "psnr_in_mask_db": splat.get("psnr_in_mask_db"), "shading_exponent": shading.get("facing_exponent"),
                  "version": report.get("version"),
                  "files": [name for name in RECONSTRUCTION_FILES if (folder / name).exists()]}
@@ -85,7 +86,8 @@ def _print_reconstruction(described: dict) -> None:
               + backed + fit)
     for pair in described["pairs"]:
         sure = "" if pair["uncertainty_deg"] is None else f", ±{pair['uncertainty_deg']:.2f}°"
-        moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal 10 % off"
+        off = "10 % off" if described.get("focal_held_by_photos") is not False else "held shorter"
+        moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal {off}"
         print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + sure + moves)
     for warning in described["warnings"]:
         print(f"  warning: {warning}")

@@ -23,6 +23,8 @@ from .process import peak_rss_mb
 
 __all__ = ["measure_real", "summarize_real", "real_table", "sensitivity_against_deviation"]
 
+_TURN_WARNING = "the turn between"  # how every warning about a turn's certainty begins or names it (pipeline.py)
+
 
 def _texture_seen_from(texture, depth, camera, target_camera, target_mask):
     """A view's ridge texture carried by its depth into ``target_camera`` (nearest pixel, nearest depth wins),
@@ -127,6 +129,8 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "focal": float(report["alignment"]["focals_px"][0]), "residual_px": report["alignment"].get("residual_px"),
               "turn_uncertainty_deg": report["alignment"].get("turn_uncertainty_deg", {}),
               "turn_sensitivity_deg": report["alignment"].get("turn_sensitivity_deg", {}),
+              "focal_probe": report["alignment"].get("focal_probe", {}),
+              "warned_turns": any(_TURN_WARNING in str(w) for w in report.get("warnings", [])),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
               "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))

@@ -143,8 +143,12 @@ class GlobalAlignment:
     """``[N, N]``: each view pair's rotation uncertainty from the fit's curvature (degrees; NaN for a view
     not aligned), where the solver gives one (Levenberg-Marquardt); None otherwise."""
     turn_sensitivity_deg: np.ndarray | None = None
-    """``[N, N]``: how far each view pair's turn moves when the focal is held 10 % off its solved value (degrees;
-    :mod:`~fingersplat3d.align.solve.sensitivity`), where the registration probed it; None otherwise."""
+    """``[N, N]``: how far each view pair's turn moves when the focal is held 10 % off its solved value, or shorter where
+    the photos do not hold it (degrees; :mod:`~fingersplat3d.align.solve.sensitivity`), where the registration probed
+    it; None otherwise."""
+    focal_probe: dict | None = None
+    """:meth:`~fingersplat3d.align.solve.sensitivity.FocalProbe.summary` of that probe (whether the photos hold the
+    focal, the loss's rises), where the registration probed it; None otherwise."""
 
     @property
     def world_to_cam(self) -> list[np.ndarray]:

@@ -10,25 +10,75 @@ So the probe holds the focal :data:`FOCAL_STEP` (10 %) longer than solved, re-fi
 state (the fit's own Levenberg-Marquardt steps) and records how far every pair's turn went: the pair's
 *sensitivity*, in degrees. A probe, not a standard deviation.
 
+**When the photos do not hold the focal at all.** Three views fix the focal through the skin all of them see, the
+fingertip's cap above all. A crop with no fingertip whose two outer views share no skin leaves two front-side pairs
+and nothing between them: the loss is flat toward a longer focal and the fit slides toward a nearly orthographic one
+(real captures cropped about their centre: fitted 1.8-21.6k px against the rig's 1.66k, turns up to 19 degrees off), where
+a 10 % step moves nothing and the probe above read 0.1-0.3 degree. So when the loss rises by less than
+:data:`FLAT_LOSS_RISE` with the focal held longer, a second probe holds it *shorter*, where the finger's angular width
+(its width in pixels over the focal) is :data:`PERSPECTIVE_STEP` larger. If the photos exclude that focal too (the loss
+rises by more than :data:`EXCLUDED_LOSS_RISE`: renders that are near-orthographic, whose turns do not hang on the
+focal) the focal stands; else the focal is not held by the photos, and that probe's moves are the pair's sensitivity.
+
 Tried and left out: the same probe on the relief scale (held 20 % flatter). Each view's depth field takes the change
 up, so once the fit has converged no turn moves (another group's crops: 0.0 degree on every pair, 6.7 degrees off on
 the worst), and the moves it had shown before were the unconverged fit still finding its way.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
 import torch
 
 from ...rotations import rotation_angle
+from ...segment.silhouette import widest_disc
 from .global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 
-__all__ = ["FOCAL_STEP", "turn_sensitivity_deg"]
+__all__ = ["FOCAL_STEP", "FLAT_LOSS_RISE", "PERSPECTIVE_STEP", "EXCLUDED_LOSS_RISE", "FocalProbe", "focal_probe",
+           "turn_sensitivity_deg"]
 
 FOCAL_STEP = 0.10
 """The focal probe: the focal held this much longer than solved (a share)."""
+FLAT_LOSS_RISE = 0.015
+"""With the focal held :data:`FOCAL_STEP` longer, a loss that rises by less than this share (or falls) does not hold
+the focal from the long side. Measured: whole real captures 1.7-5.3 % (finger 1, tuned on: 2.5-5.3 %; finger 2, held
+out: 1.7-4.5 %); synthetic captures 4-41 %; the real captures cropped to no fingertip (``tools/bench_real.py
+--crop-tip``) -10.2 to +1.4 % (finger 1: -4.4 to +0.9 %; finger 2: -10.2 to +1.4 %); another group's
+near-orthographic renders 0.1-0.3 %."""
+PERSPECTIVE_STEP = 0.05
+"""The shorter probe: the finger's angular width (its width over the focal, radians) this much larger. On the real
+crops a focal 1.2-3.3 times shorter, which moves their turns by 0.5-6.1 degrees."""
+EXCLUDED_LOSS_RISE = 1.0
+"""The shorter probe's focal is excluded by the photos when the loss rises by more than this share (doubles). Measured:
+the real crops -14 to +77 %; the near-orthographic renders +185 to +977 %."""
+
+
+@dataclass(frozen=True)
+class FocalProbe:
+    """What the focal probes found (the module docstring)."""
+
+    moves: np.ndarray
+    """``[N, N]`` degrees: each pair's sensitivity (the shorter probe's moves where it counts, else the longer's)."""
+    longer_loss_rise: float
+    """How much the loss rose (a share; negative: fell) with the focal held :data:`FOCAL_STEP` longer."""
+    shorter_share: float | None = None
+    """The shorter probe's focal over the solved one, when it ran."""
+    shorter_loss_rise: float | None = None
+    """How much the loss rose at the shorter probe's focal, when it ran."""
+
+    @property
+    def held(self) -> bool:
+        """Whether the photos hold the focal: False when neither probe raised the loss as a fixed focal does."""
+        return self.shorter_loss_rise is None or self.shorter_loss_rise > EXCLUDED_LOSS_RISE
+
+    def summary(self) -> dict:
+        """The report's ``focal_probe`` entry."""
+        entry = {"held": self.held, "longer_loss_rise": round(self.longer_loss_rise, 4)}
+        if self.shorter_share is not None:
+            entry |= {"shorter_share": round(self.shorter_share, 3), "shorter_loss_rise": round(self.shorter_loss_rise, 4)}
+        return entry
 
 
 def _turns(alignment: GlobalAlignment) -> np.ndarray:
@@ -37,28 +87,56 @@ def _turns(alignment: GlobalAlignment) -> np.ndarray:
     return np.degrees(rotation_angle(rotations[:, None], rotations[None, :]).numpy())
 
 
-def turn_sensitivity_deg(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess,
-                         pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig,
-                         min_turns: np.ndarray | None = None) -> np.ndarray | None:
-    """``[N, N]`` degrees: how far each pair's turn moves with the focal held :data:`FOCAL_STEP` longer (the module
-    docstring); None when the focal is held anyway (a known focal, a rig).
+def _held_at(alignment: GlobalAlignment, depths, focal_guess, pairs, config: GlobalAlignConfig, min_turns,
+             share: float) -> GlobalAlignment:
+    """Everything re-fitted from the solved state with the focal held at ``share`` times the solved one (the shape
+    kept: lateral size goes as 1/focal, so the relief and the field do too)."""
+    start = replace(alignment, focals=[f * share for f in alignment.focals],
+                    relief_scale=[a / share for a in alignment.relief_scale],
+                    fields=[np.asarray(f) / share for f in alignment.fields])
+    return global_align(depths, focal_guess, pairs, replace(config, optimize_focal=False), previous=start,
+                        min_turns=min_turns, uncertainty=False)
+
+
+def _loss_rise(moved: GlobalAlignment, alignment: GlobalAlignment) -> float:
+    before, after = alignment.loss_history[-1], moved.loss_history[-1]
+    return float(after / before - 1.0) if before > 0 else 0.0
+
+
+def focal_probe(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess,
+                pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig,
+                min_turns: np.ndarray | None = None) -> FocalProbe | None:
+    """How far each pair's turn moves with the focal held off its solved value (the module docstring); None when the
+    focal is held anyway (a known focal, a rig).
 
     ``alignment`` is the solved alignment of ``depths``, ``focal_guess``, ``pairs``, ``config`` and ``min_turns``
-    (as :func:`~fingersplat3d.align.solve.global_opt.global_align` was called for it). NaN where a view is not
-    aligned; 0 on the diagonal.
+    (as :func:`~fingersplat3d.align.solve.global_opt.global_align` was called for it). Moves are NaN where a view is not
+    aligned, 0 on the diagonal.
     """
     if not config.optimize_focal:
         return None
     aligned = np.asarray(alignment.aligned, bool)
-    result = np.zeros((len(depths), len(depths)))
+    moves, rise, shorter, shorter_rise = np.zeros((len(depths), len(depths))), 0.0, None, None
     if aligned.sum() >= 2:
-        longer = 1.0 + FOCAL_STEP  # the shape kept: lateral size goes as 1/focal, so the relief and the field do too
-        start = replace(alignment, focals=[f * longer for f in alignment.focals],
-                        relief_scale=[a / longer for a in alignment.relief_scale],
-                        fields=[np.asarray(f) / longer for f in alignment.fields])
-        moved = global_align(depths, focal_guess, pairs, replace(config, optimize_focal=False), previous=start,
-                             min_turns=min_turns, uncertainty=False)
-        result = np.abs(_turns(moved) - _turns(alignment))
-    result[~aligned, :] = np.nan
-    result[:, ~aligned] = np.nan
-    return result
+        longer = _held_at(alignment, depths, focal_guess, pairs, config, min_turns, 1.0 + FOCAL_STEP)
+        moves, rise = np.abs(_turns(longer) - _turns(alignment)), _loss_rise(longer, alignment)
+        if rise < FLAT_LOSS_RISE:
+            width = float(np.median([widest_disc(np.isfinite(d)) for d, a in zip(alignment.depths, aligned) if a]))
+            focal = float(alignment.focals[0])
+            if width > 0 and np.isfinite(focal) and focal > 0:
+                shorter = 1.0 / (1.0 + PERSPECTIVE_STEP * focal / width)  # width / f' = width / f + PERSPECTIVE_STEP
+                held = _held_at(alignment, depths, focal_guess, pairs, config, min_turns, shorter)
+                shorter_rise = _loss_rise(held, alignment)
+                if shorter_rise <= EXCLUDED_LOSS_RISE:
+                    moves = np.maximum(moves, np.abs(_turns(held) - _turns(alignment)))
+    moves[~aligned, :] = np.nan
+    moves[:, ~aligned] = np.nan
+    return FocalProbe(moves, rise, shorter, shorter_rise)
+
+
+def turn_sensitivity_deg(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess,
+                         pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig,
+                         min_turns: np.ndarray | None = None) -> np.ndarray | None:
+    """``[N, N]`` degrees: :attr:`FocalProbe.moves` of :func:`focal_probe`; None when the focal is held anyway."""
+    probe = focal_probe(alignment, depths, focal_guess, pairs, config, min_turns)
+    return None if probe is None else probe.moves

@@ -1,0 +1,78 @@
+"""Real captures cropped so that no fingertip is in the frame: the rig check of crops, against the whole captures.
+
+Datasets publish crops cut straight across the finger, and another group's renders are cut at both ends; the shape
+work's target is that such views register as well as whole fingers. The real dev captures show the whole fingertip,
+so :func:`crop_without_tip` cuts each photo at run time (nothing is written next to the data): symmetric about the
+image centre, so that the principal point stays where the fit assumes it (a crop off centre would move it, and its
+turns with it, by up to 9 degrees at these sizes), with the tip-side edge :data:`CUT_SHARE` of the finger's width past
+the fingertip (the whole cap outside the frame); the far edge then cuts the finger too, as far from the centre.
+
+Each crop is scored by :func:`~fingersplat3d.eval.rig_consistency.deviation_against` the whole captures' rig mean: the
+same cameras, so the crop's turns should be the rig's. Pure numpy (the finger found by
+:func:`~fingersplat3d.segment.masks.finger_mask`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["CUT_SHARE", "crop_without_tip", "crop_table"]
+
+CUT_SHARE = 0.3
+"""The tip-side edge of the crop lies this share of the finger's width past the fingertip, along the finger."""
+_MIN_HALF = 0.2  # the crop keeps at least this share of the finger's width on either side of the centre
+
+
+def crop_without_tip(view, share: float = CUT_SHARE):
+    """``view`` cropped about its image centre along the image axis nearest the finger's, the fingertip and ``share``
+    of the finger's width behind it outside the frame (at least :data:`_MIN_HALF` of the width kept each side of the
+    centre, the tip still half that share outside); None when the finger is not found or its tip lies too near or past
+    the centre for that."""
+    from ..scene import View
+    from ..segment.masks import finger_mask
+    from ..segment.silhouette import silhouette_frame, widest_disc
+    from ..errors import InputError
+
+    try:
+        mask = finger_mask(view.image, name=view.name)
+    except InputError:
+        return None
+    frame = silhouette_frame(mask)
+    width = widest_disc(mask)
+    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
+    along = 1 if horizontal else 0  # the image axis index the finger runs along: columns (1) or rows (0)
+    size = mask.shape[along]
+    centre = (size - 1) / 2.0
+    coordinate = np.nonzero(mask.any(axis=1 - along))[0]
+    toward_high = (frame.axis[0] if horizontal else frame.axis[1]) > 0
+    tip = float(coordinate.max() if toward_high else coordinate.min())
+    cut = tip - share * width if toward_high else tip + share * width
+    half = max(abs(cut - centre), _MIN_HALF * width)
+    edge = centre + half if toward_high else centre - half  # the crop's tip-side edge
+    if width <= 0 or (cut > centre) != toward_high or abs(tip - edge) < 0.5 * share * width or not (
+            0 <= centre - half and centre + half <= size - 1):
+        return None
+    first, last = int(np.ceil(centre - half)), int(np.floor(centre + half)) + 1
+    keep = (slice(None), slice(first, last)) if horizontal else (slice(first, last), slice(None))
+    return View(view.name, view.image[keep])
+
+
+def crop_table(records: list[dict], deviations: dict) -> str:
+    """The markdown table of the cropped captures: registered views, crop size, each pair's deviation from the whole
+    captures' rig mean, the focal, whether the photos held it and the largest sensitivity; then the medians."""
+    lines = ["| capture | views registered | crop px | rig deviation 0-1 / 0-2 / 1-2 ° | focal px | focal held | "
+             "sensitivity max ° | warned |", "|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        values = [deviations.get(p, {}).get(r["capture"]) for p in ("01", "02", "12")]
+        deviation = " / ".join("–" if v is None else f"{v:.2f}" for v in values)
+        sensitivity = [v for v in r.get("turn_sensitivity_deg", {}).values() if v is not None]
+        held = r.get("focal_probe", {}).get("held")
+        size = " ".join(f"{w}×{h}" for w, h in r["sizes"][:1])
+        lines.append(f"| {r['capture']} | {r['registered']}/{len(r['sizes'])} | {size} | {deviation} | {r['focal']:.0f} | "
+                     f"{'–' if held is None else 'yes' if held else 'no'} | "
+                     f"{max(sensitivity) if sensitivity else float('nan'):.2f} | {'yes' if r.get('warned_turns') else 'no'} |")
+    whole = [r for r in records if r["registered"] == len(r["sizes"])]
+    medians = " / ".join(f"{np.median(list(deviations[p].values())):.2f}" if deviations.get(p) else "–"
+                         for p in ("01", "02", "12"))
+    largest = max((v for p in deviations.values() for v in p.values()), default=float("nan"))
+    lines.append(f"| **median** | {len(whole)}/{len(records)} captures whole | | **{medians}** (max {largest:.2f}) | | | | |")
+    return "\n".join(lines)

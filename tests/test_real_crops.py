@@ -1,0 +1,54 @@
+"""Photos cropped so no fingertip is in the frame (experiments/real_crops.py), and what a fuse of such crops says of
+its focal (the focal probe of align/solve/sensitivity.py)."""
+import numpy as np
+import pytest
+
+from fingersplat3d.experiments.real_crops import CUT_SHARE, crop_without_tip
+from fingersplat3d.scene import View
+from fingersplat3d.segment.masks import finger_mask
+from fingersplat3d.segment.silhouette import widest_disc
+
+
+@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+def test_the_crop_keeps_the_image_centre_and_leaves_the_tip_outside(uwa640, turn):
+    """Whichever way the finger points, the crop is symmetric about the image centre (the principal point stays where
+    the fit assumes it), the finger runs out of both of its ends, and the tip lies outside it by about the share."""
+    view = uwa640.views[1]
+    image = np.rot90(view.image, turn).copy()
+    whole = View("v", image)
+    cropped = crop_without_tip(whole)
+    assert cropped is not None
+    along = 1 if turn % 2 == 0 else 0  # the synthetic finger lies along the image's columns before turning
+    removed = image.shape[along] - cropped.image.shape[along]
+    assert removed > 0 and removed % 2 == 0 and cropped.image.shape[1 - along] == image.shape[1 - along]
+    first = removed // 2
+    span = slice(first, first + cropped.image.shape[along])
+    keep = (slice(None), span) if along else (span, slice(None))
+    np.testing.assert_array_equal(cropped.image, image[keep])
+    mask, crop_mask = finger_mask(image), finger_mask(cropped.image)
+    ends = (crop_mask[:, 0], crop_mask[:, -1]) if along else (crop_mask[0], crop_mask[-1])
+    assert all(end.sum() > 0.5 * widest_disc(mask) for end in ends)  # cut by the frame at both ends
+    kept = np.zeros_like(mask)
+    kept[keep] = True
+    outside = mask & ~kept
+    assert outside.sum() > CUT_SHARE * 0.5 * widest_disc(mask) ** 2  # the tip and its cap are outside
+
+
+def test_no_crop_without_a_finger():
+    assert crop_without_tip(View("blank", np.zeros((64, 80), np.float32))) is None
+
+
+def test_a_real_capture_cropped_to_no_tip_is_told_its_focal_is_not_held(real_dev):
+    """Finger 1's first capture cropped about the centre (its two side views then share no skin): the photos do not
+    hold the focal, report.json says so and a warning says what fixes it; the whole capture holds it."""
+    from fingersplat3d.io.datasets import load_uwa
+    from fingersplat3d.pipeline import FuseConfig, fuse
+    from fingersplat3d.scene import Capture
+
+    (real,) = [c for c in load_uwa(real_dev) if c.metadata["name"] == "1_1_1_1"]
+    cropped = Capture([crop_without_tip(view) for view in real.views], real.metadata)
+    report = fuse(cropped, FuseConfig(splat=None)).report
+    probe = report["alignment"]["focal_probe"]
+    assert not probe["held"] and probe["longer_loss_rise"] < 0.015 and probe["shorter_share"] < 1  # measured -1.5 %, 0.50
+    assert any("do not hold the focal" in warning and "--focal-px" in warning for warning in report["warnings"])
+    assert max(report["alignment"]["turn_sensitivity_deg"].values()) > 1.5  # measured 4.9
