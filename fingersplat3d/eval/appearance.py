@@ -3,7 +3,7 @@
 :func:`image_statistics` measures one view (image in [0, 1] and its finger mask):
 
 * ``skin``: median intensity on the finger; ``background`` and ``noise``: median and robust
-  deviation (1.4826 MAD) of the background away from the finger;
+  deviation (:func:`~fingersplat3d.robust.robust_sigma`, 1.4826 MAD) of the background away from the finger;
 * ``ridge_contrast``: RMS of the ridge band (difference of Gaussians around the ridge period) in the
   finger's core, over the skin level: how visible the ridges are;
 * ``ridge_period_px``: :func:`~fingersplat3d.align.correspond.texture.estimate_ridge_period`;
@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from ..align.correspond.texture import as_gray, estimate_ridge_period, suppress_glints
+from ..robust import robust_sigma
 from ..segment.silhouette import silhouette_frame
 
 __all__ = ["ImageStatistics", "image_statistics"]
@@ -59,7 +60,7 @@ def image_statistics(image: np.ndarray, mask: np.ndarray) -> ImageStatistics:
     far = outside > max(10.0, 0.05 * width)
     background_values = gray[far] if far.any() else gray[~mask]
     background = float(np.median(background_values)) if background_values.size else 0.0
-    noise = 1.4826 * float(np.median(np.abs(background_values - background))) if background_values.size else 0.0
+    noise = robust_sigma(background_values, background)
     period = estimate_ridge_period(gray, mask)
     core = inside > 0.25 * width
     band = cv2.GaussianBlur(gray, (0, 0), 0.18 * period) - cv2.GaussianBlur(gray, (0, 0), 0.6 * period)

@@ -21,6 +21,7 @@ import os
 import numpy as np
 
 from ..errors import InputError
+from ..robust import robust_sigma
 
 __all__ = ["pyfing_enhance", "LEARNED_ENHANCERS", "ENHANCERS"]
 
@@ -46,7 +47,7 @@ def as_fingerprint(texture: np.ndarray, mask: np.ndarray) -> np.ndarray:
     texture = np.asarray(texture, np.float64)
     inside = np.asarray(mask, bool)
     values = texture[inside]
-    spread = float(np.median(np.abs(values - np.median(values)))) * 1.4826 if values.size else 0.0
+    spread = robust_sigma(values)
     centred = (texture - (np.median(values) if values.size else 0.0)) / max(spread, 1e-12)
     image = np.clip(128.0 - 40.0 * centred, 0, 255)
     return np.where(inside, image, 255).astype(np.uint8)

@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..robust import robust_sigma
 from .regions import fill_holes
 
 __all__ = ["finger_mask", "mask_iou"]
@@ -149,7 +150,7 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
         raise InputError(f"{name}: the image is bright almost everywhere, so there is no background "
                          "to separate a finger from")
     bg_level = float(np.median(background))
-    bg_noise = 1.4826 * float(np.median(np.abs(background - bg_level)))
+    bg_noise = robust_sigma(background, bg_level)
     skin_level = float(np.median(skin))
     contrast = skin_level - bg_level
     if contrast <= MIN_CONTRAST_SIGMAS * bg_noise or contrast < 1e-3 * max(high, 1e-12):

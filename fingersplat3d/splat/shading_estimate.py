@@ -22,6 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from ..align.correspond.texture import as_gray, masked_blur
+from ..robust import robust_sigma
 from ..sampling import sample_nearest
 from ..scene import Camera
 from .shading import MAX_EXPONENT
@@ -117,7 +118,7 @@ def estimate_shading(images: Sequence[np.ndarray], masks: Sequence[np.ndarray], 
         rows = np.nonzero(view > 0)[0]
         design[rows, view[rows]] += sign
     residual = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
-    spread = 1.4826 * np.median(np.abs(residual - np.median(residual)))  # the MAD as a standard deviation
+    spread = robust_sigma(residual)
     used = np.abs(residual) <= OUTLIER_DEVIATIONS * max(spread, 1e-6)
     if used.sum() < MIN_POINTS:
         return none

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ...errors import InputError
+from ...robust import robust_sigma
 
 __all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture",
            "DEFAULT_PERIOD_PX"]
@@ -173,7 +174,7 @@ def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor:
     if inside.size < 16:
         return gray
     local = np.sqrt(cv2.GaussianBlur(top_hat * top_hat, (0, 0), 6.0 * (radius + 1)))
-    noise = 1.4826 * float(np.median(np.abs(inside - np.median(inside))))
+    noise = robust_sigma(inside)
     inner = cv2.erode(np.asarray(mask, np.uint8), disc, iterations=2) > 0  # the outline's step is no glint
     glint = (top_hat > factor * np.maximum(local, noise)) & inner
     glint = cv2.dilate(glint.astype(np.uint8), disc) > 0
