@@ -80,6 +80,24 @@ def test_projection_twin_matches_the_tensor_projection():
         torch.testing.assert_close(a, b, rtol=1e-9, atol=1e-9 * b.abs().max().item(), msg=name)
 
 
+def test_a_fixed_camera_gets_no_gradient_and_leaves_the_others_as_they_were():
+    """With the pose and K not requiring grad, the backward skips their sums (project_backward's ``camera_grad``):
+    they get none, and the means', quats' and scales' gradients are the same to the bit."""
+    args, width, height = random_scene(4, n=80)
+    means, quats, scales, opacities, _, world_to_cam, K = args
+    free = [t.clone().requires_grad_() for t in (means, quats, scales, world_to_cam, K)]
+    fixed = [t.clone().requires_grad_() for t in (means, quats, scales)] + [world_to_cam.clone(), K.clone()]
+    grads = []
+    for leaves in (free, fixed):
+        projection, _ = project_cpu(*leaves[:3], opacities, *leaves[3:], width, height, 0.01, 0.3)
+        loss = (projection.means2d.sum() + projection.conics.square().sum() + projection.depths.sum())
+        loss.backward()
+        grads.append([t.grad for t in leaves])
+    assert all(g is not None for g in grads[0]) and grads[1][3] is None and grads[1][4] is None
+    for a, b in zip(grads[0][:3], grads[1][:3]):
+        assert torch.equal(a, b)
+
+
 def test_thread_count_does_not_change_the_result(monkeypatch):
     args, width, height = random_scene(6, n=300, dtype=torch.float32, width=70, height=50)
     results = []

@@ -121,9 +121,10 @@ class _ProjectCPU(torch.autograd.Function):
         chunks = 64  # camera gradient partial sums: a fixed count, so any thread count gives the same sums
         zeros = lambda t, shape: np.zeros(shape) if t is None else _numpy(t)  # noqa: E731
         n = arrays[0].shape[0]
+        camera_grad = bool(ctx.needs_input_grad[4] or ctx.needs_input_grad[5])  # a fixed camera: no sums for it
         g_means, g_quats, g_scales, g_camera = project_backward(
             *arrays, camera, width, height, low_pass, valid, zeros(grad_means2d, (n, 2)),
-            zeros(grad_conics, (n, 3)), zeros(grad_depths, (n,)), chunks)
+            zeros(grad_conics, (n, 3)), zeros(grad_depths, (n,)), chunks, camera_grad)
         dtype = grad_means2d.dtype if grad_means2d is not None else torch.float64
         g_camera = torch.from_numpy(g_camera.sum(0))
         w2c_dtype, k_dtype = ctx.dtypes
@@ -133,8 +134,8 @@ class _ProjectCPU(torch.autograd.Function):
         g_K = torch.zeros(3, 3, dtype=torch.float64)
         g_K[0, 0], g_K[1, 1], g_K[0, 2], g_K[1, 2] = g_camera[12:16]
         return (torch.from_numpy(g_means).to(dtype), torch.from_numpy(g_quats).to(dtype),
-                torch.from_numpy(g_scales).to(dtype), None, g_w2c.to(w2c_dtype), g_K.to(k_dtype),
-                None, None, None, None)
+                torch.from_numpy(g_scales).to(dtype), None, g_w2c.to(w2c_dtype) if ctx.needs_input_grad[4] else None,
+                g_K.to(k_dtype) if ctx.needs_input_grad[5] else None, None, None, None, None)
 
 
 def project_cpu(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, world_to_cam: Tensor, K: Tensor,
