@@ -71,6 +71,10 @@ def main() -> int:
                         help="also fuse every capture cropped about its centre with the fingertip and SHARE (default 0.3) "
                              "of the finger's width behind it outside the frame, against the whole captures' rig")
     args = parser.parse_args()
+    if args.crop_tip is not None and not 0.0 <= args.crop_tip <= 2.0:
+        print(f"bench_real: --crop-tip {args.crop_tip:g}: the share of the finger's width cut behind the tip must lie "
+              "in 0-2", file=sys.stderr)
+        return 2
     if not args.data.is_dir():
         print(f"bench_real: {args.data}: no such folder (the real dev captures live in ../shared/data/uwa-real-dev)",
               file=sys.stderr)

@@ -27,10 +27,10 @@ def crop_without_tip(view, share: float = CUT_SHARE):
     of the finger's width behind it outside the frame (at least :data:`_MIN_HALF` of the width kept each side of the
     centre, the tip still half that share outside); None when the finger is not found or its tip lies too near or past
     the centre for that."""
+    from ..errors import InputError
     from ..scene import View
     from ..segment.masks import finger_mask
     from ..segment.silhouette import silhouette_frame, widest_disc
-    from ..errors import InputError
 
     try:
         mask = finger_mask(view.image, name=view.name)
