@@ -274,6 +274,10 @@ def test_the_focal_probe_says_when_the_photos_do_not_hold_the_focal(capture, mon
     two = focal_probe(two_alignment, depths[:2], focal, pairs[:1], config)
     assert not two.held and two.longer_loss_rise < FLAT_LOSS_RISE  # measured -0.5 %
     assert 0.3 < two.shorter_share < 1.0 and two.shorter_loss_rise <= EXCLUDED_LOSS_RISE  # measured 0.73, +9.8 %
+    from dataclasses import replace
+
+    unknown = focal_probe(replace(two_alignment, loss_history=[]), depths[:2], focal, pairs[:1], config)
+    assert unknown.held and unknown.summary()["longer_loss_rise"] is None  # no loss to compare: no evidence either way
     monkeypatch.setattr(sensitivity, "FLAT_LOSS_RISE", -np.inf)  # the longer probe alone, as before
     longer = focal_probe(two_alignment, depths[:2], focal, pairs[:1], config)
     assert longer.held and two.moves[0, 1] > 2 * longer.moves[0, 1]  # measured 11.1 against 4.1

@@ -71,13 +71,15 @@ class FocalProbe:
     @property
     def held(self) -> bool:
         """Whether the photos hold the focal: False when neither probe raised the loss as a fixed focal does."""
-        return self.shorter_loss_rise is None or self.shorter_loss_rise > EXCLUDED_LOSS_RISE
+        return not _fits_as_well(self.shorter_loss_rise)
 
     def summary(self) -> dict:
         """The report's ``focal_probe`` entry."""
-        entry = {"held": self.held, "longer_loss_rise": round(self.longer_loss_rise, 4)}
+        rise = round(self.longer_loss_rise, 4) if np.isfinite(self.longer_loss_rise) else None
+        entry = {"held": self.held, "longer_loss_rise": rise}
         if self.shorter_share is not None:
-            entry |= {"shorter_share": round(self.shorter_share, 3), "shorter_loss_rise": round(self.shorter_loss_rise, 4)}
+            shorter = round(self.shorter_loss_rise, 4) if np.isfinite(self.shorter_loss_rise) else None
+            entry |= {"shorter_share": round(self.shorter_share, 3), "shorter_loss_rise": shorter}
         return entry
 
 
@@ -98,9 +100,18 @@ def _held_at(alignment: GlobalAlignment, depths, focal_guess, pairs, config: Glo
                         min_turns=min_turns, uncertainty=False)
 
 
+def _fits_as_well(shorter_rise: float | None) -> bool:
+    """Whether the shorter probe's focal fits about as well as the solved one (a finite rise, at most
+    :data:`EXCLUDED_LOSS_RISE`); no probe, or a loss that could not be compared, says nothing."""
+    return shorter_rise is not None and bool(np.isfinite(shorter_rise)) and shorter_rise <= EXCLUDED_LOSS_RISE
+
+
 def _loss_rise(moved: GlobalAlignment, alignment: GlobalAlignment) -> float:
-    before, after = alignment.loss_history[-1], moved.loss_history[-1]
-    return float(after / before - 1.0) if before > 0 else 0.0
+    """How much the final loss rose from ``alignment`` to ``moved`` (a share); NaN where either has none to compare."""
+    if not (alignment.loss_history and moved.loss_history):
+        return float("nan")
+    before, after = float(alignment.loss_history[-1]), float(moved.loss_history[-1])
+    return after / before - 1.0 if before > 0 and np.isfinite(before) and np.isfinite(after) else float("nan")
 
 
 def focal_probe(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess,
@@ -120,14 +131,14 @@ def focal_probe(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_
     if aligned.sum() >= 2:
         longer = _held_at(alignment, depths, focal_guess, pairs, config, min_turns, 1.0 + FOCAL_STEP)
         moves, rise = np.abs(_turns(longer) - _turns(alignment)), _loss_rise(longer, alignment)
-        if rise < FLAT_LOSS_RISE:
+        if rise < FLAT_LOSS_RISE:  # NaN (no loss to compare) is no evidence either way: the focal stands
             width = float(np.median([widest_disc(np.isfinite(d)) for d, a in zip(alignment.depths, aligned) if a]))
             focal = float(alignment.focals[0])
             if width > 0 and np.isfinite(focal) and focal > 0:
                 shorter = 1.0 / (1.0 + PERSPECTIVE_STEP * focal / width)  # width / f' = width / f + PERSPECTIVE_STEP
                 held = _held_at(alignment, depths, focal_guess, pairs, config, min_turns, shorter)
                 shorter_rise = _loss_rise(held, alignment)
-                if shorter_rise <= EXCLUDED_LOSS_RISE:
+                if _fits_as_well(shorter_rise):
                     moves = np.maximum(moves, np.abs(_turns(held) - _turns(alignment)))
     moves[~aligned, :] = np.nan
     moves[:, ~aligned] = np.nan
