@@ -43,7 +43,7 @@ from numba import njit, prange
 
 from .cpu_lanes import LANE_KERNELS
 from .cpu_tile_math import (A, B, C, EA, EB, EC, EXPONENT_RANGE, FEATS, MX, MY, O, QMAX, TILE, X0, X1, Y0, Y1,
-                            conic_terms, falloff_start, load_pair, quadratic, tile_rect)
+                            conic_terms, falloff_exact, falloff_start, load_pair, quadratic_at, tile_rect)
 from .project import ALPHA_MAX, ALPHA_MIN
 
 __all__ = ["TILE", "bin_tiles", "composite_backward", "composite_forward", "gather_pairs", "prepare", "reduce_pairs"]
@@ -87,7 +87,7 @@ def _records(means2d, conics, opacities, boxes, feats, row, drawn):
         for cx in (boxes[g, 0], boxes[g, 2]):
             for cy in (boxes[g, 1], boxes[g, 3]):
                 dx, dy = cx - mx, cy - my
-                q = quadratic(mx, my, a, b, c, cx, cy)
+                q = quadratic_at(a, b, c, dx, dy)
                 step_x = a * (2.0 * dx + 1.0) + 2.0 * b * dy
                 step_y = c * (2.0 * dy + 1.0) + 2.0 * b * dx
                 largest = max(largest, abs(q), abs(step_x), abs(step_y), abs(a), abs(b), abs(c))
@@ -220,7 +220,7 @@ def _general_forward(starts, pairs, width, height, tiles_x, min_transmittance, c
                     py = y - ty0
                     for x in range(bx0, bx1 + 1):
                         if ea == 0.0:  # outside the incremental range: one exp per pixel
-                            falloff = math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
+                            falloff = falloff_exact(mx, my, a, b, c, x, y)
                         raw = o * falloff
                         falloff *= ratio
                         ratio *= ea
@@ -295,7 +295,7 @@ def _general_backward(starts, pairs, width, height, tiles_x, final, consumed, gr
                     for x in range(bx0, bx1 + 1):
                         dx = x - mx
                         if ea == 0.0:  # outside the incremental range: one exp per pixel
-                            falloff = math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
+                            falloff = falloff_exact(mx, my, a, b, c, x, y)
                         here_falloff = falloff
                         falloff *= ratio
                         ratio *= ea
@@ -317,7 +317,7 @@ def _general_backward(starts, pairs, width, height, tiles_x, final, consumed, gr
                         if raw >= ALPHA_MAX:  # clamped: alpha does not depend on the parameters
                             continue
                         g_o += grad_alpha * here_falloff
-                        if quadratic(mx, my, a, b, c, x, y) <= 0.0:  # q clamped at 0 (rounding only)
+                        if quadratic_at(a, b, c, dx, dy) <= 0.0:  # q clamped at 0 (rounding only)
                             continue
                         t_mx, t_my, t_a, t_b, t_c = conic_terms(-0.5 * grad_alpha * raw, a, b, c, dx, dy)
                         g_mx += t_mx

@@ -36,12 +36,10 @@ feature counts, and ``tests/test_cpu_raster.py`` checks these against them.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit, prange
 
-from .cpu_tile_math import TILE, conic_terms, falloff_start, load_pair, quadratic, tile_rect
+from .cpu_tile_math import TILE, conic_terms, falloff_exact, falloff_start, load_pair, quadratic_at, tile_rect
 from .project import ALPHA_MAX, ALPHA_MIN
 
 __all__ = ["LANE_KERNELS", "NARROW"]
@@ -81,7 +79,7 @@ def _lanes_exact(buf, mx, my, a, b, c, bx0, bx1, y, tx0, ty0):
     buf[FALL + row:FALL + row + TILE] = 0.0
     buf[STEP + row:STEP + row + TILE] = 1.0
     for x in range(bx0, bx1 + 1):
-        buf[FALL + row + x - tx0] = math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
+        buf[FALL + row + x - tx0] = falloff_exact(mx, my, a, b, c, x, y)
 
 
 @njit(cache=True, inline="always")
@@ -156,7 +154,7 @@ def _row_backward(buf, start, f0, f1, f2, f3, k, o, ec, mx, my, a, b, c, x0, dy,
             w[behind + 3 * PLANE + i] = b3 + f3 * weight
         grad_alpha = grad_alpha if live & (raw < ALPHA_MAX) else 0.0  # clamped: alpha is constant
         g_o += grad_alpha * falloff
-        q = dx * (a * dx + 2.0 * b * dy) + c * dy * dy
+        q = quadratic_at(a, b, c, dx, dy)
         grad_q = -0.5 * grad_alpha * raw if q > 0.0 else 0.0  # q clamped at 0 (rounding only)
         t_mx, t_my, t_a, t_b, t_c = conic_terms(grad_q, a, b, c, dx, dy)
         g_mx += t_mx

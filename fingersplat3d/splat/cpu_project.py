@@ -199,25 +199,23 @@ def project_backward(means, quats, scales, camera, width, height, low_pass, vali
                 if -lim_x_neg < xz < lim_x_pos:
                     g_p[0] += g_tx / z
                     g_p[2] -= g_tx * xz / z
-                elif not camera_grad:
-                    pass
-                elif xz >= lim_x_pos:  # tx = (width - cx + m width) / fx
-                    gc[14] -= g_tx / fx
-                    gc[12] -= g_tx * lim_x_pos / fx
-                else:  # tx = -(cx + m width) / fx
-                    gc[14] -= g_tx / fx
-                    gc[12] += g_tx * lim_x_neg / fx
+                elif camera_grad:  # clamped: tx depends on fx and cx only
+                    if xz >= lim_x_pos:  # tx = (width - cx + m width) / fx
+                        gc[14] -= g_tx / fx
+                        gc[12] -= g_tx * lim_x_pos / fx
+                    else:  # tx = -(cx + m width) / fx
+                        gc[14] -= g_tx / fx
+                        gc[12] += g_tx * lim_x_neg / fx
                 if -lim_y_neg < yz < lim_y_pos:
                     g_p[1] += g_ty / z
                     g_p[2] -= g_ty * yz / z
-                elif not camera_grad:
-                    pass
-                elif yz >= lim_y_pos:
-                    gc[15] -= g_ty / fy
-                    gc[13] -= g_ty * lim_y_pos / fy
-                else:
-                    gc[15] -= g_ty / fy
-                    gc[13] += g_ty * lim_y_neg / fy
+                elif camera_grad:
+                    if yz >= lim_y_pos:
+                        gc[15] -= g_ty / fy
+                        gc[13] -= g_ty * lim_y_pos / fy
+                    else:
+                        gc[15] -= g_ty / fy
+                        gc[13] += g_ty * lim_y_neg / fy
                 # u = fx x / z + cx, v = fy y / z + cy.
                 gu, gv = float(grad_means2d[g, 0]), float(grad_means2d[g, 1])
                 if camera_grad:

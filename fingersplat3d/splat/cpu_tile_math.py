@@ -9,7 +9,8 @@ import math
 
 from numba import njit
 
-__all__ = ["TILE", "FEATS", "EXPONENT_RANGE", "conic_terms", "falloff_start", "load_pair", "quadratic", "tile_rect"]
+__all__ = ["TILE", "FEATS", "EXPONENT_RANGE", "conic_terms", "falloff_exact", "falloff_start", "load_pair", "quadratic",
+           "quadratic_at", "tile_rect"]
 
 TILE = 16
 """Tile side in pixels: 256 pixels per tile keep a tile's state in L1 and amortise the list walk."""
@@ -34,10 +35,22 @@ def load_pair(rec, feat, tx0, ty0, tx1, ty1):
 
 
 @njit(cache=True, inline="always")
+def quadratic_at(a: float, b: float, c: float, dx: float, dy: float) -> float:
+    """q = d^T conic d for the offset d = (dx, dy) from the mean."""
+    return dx * (a * dx + 2.0 * b * dy) + c * dy * dy
+
+
+@njit(cache=True, inline="always")
 def quadratic(mx: float, my: float, a: float, b: float, c: float, x: int, y: int) -> float:
     """q = d^T conic d at pixel (x, y), d = pixel - mean."""
-    dx, dy = x - mx, y - my
-    return dx * (a * dx + 2.0 * b * dy) + c * dy * dy
+    return quadratic_at(a, b, c, x - mx, y - my)
+
+
+@njit(cache=True, inline="always")
+def falloff_exact(mx: float, my: float, a: float, b: float, c: float, x: int, y: int) -> float:
+    """exp(-q / 2) at pixel (x, y) by its own exp (q clamped at 0: rounding only), where the products of
+    :func:`falloff_start` are not used."""
+    return math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -48,7 +61,7 @@ def falloff_start(mx: float, my: float, a: float, b: float, c: float, x: int, y:
     ratio_y *= exp(-c), and the row's first ratio_x *= exp(-b): three exps per (tile, Gaussian)
     pair instead of one per pixel, exact up to float64 rounding over a tile's 16 + 16 steps."""
     dx, dy = x - mx, y - my
-    return (math.exp(-0.5 * max(quadratic(mx, my, a, b, c, x, y), 0.0)),
+    return (falloff_exact(mx, my, a, b, c, x, y),
             math.exp(-0.5 * (a * (2.0 * dx + 1.0) + 2.0 * b * dy)),
             math.exp(-0.5 * (c * (2.0 * dy + 1.0) + 2.0 * b * dx)))
 
