@@ -242,20 +242,20 @@ def _exact_three(capture):
 def test_turn_sensitivity_is_small_where_three_views_pin_the_turns_and_large_for_two(capture):
     """The probe of align/solve/sensitivity.py: three views with exact matches hold their turns while the focal is
     held off (a fraction of a degree); two views, whose turn follows the focal, move by more."""
-    from fingersplat3d.align.solve.sensitivity import turn_sensitivity_deg
+    from fingersplat3d.align.solve.sensitivity import focal_probe
 
     pairs, depths, focal = _exact_three(capture)
     config = GlobalAlignConfig()
     three = global_align(depths, focal, pairs, config)
-    moves = turn_sensitivity_deg(three, depths, focal, pairs, config)
+    moves = focal_probe(three, depths, focal, pairs, config).moves
     assert moves.shape == (3, 3) and np.allclose(np.diag(moves), 0) and np.allclose(moves, moves.T)
     assert np.nanmax(moves) < 1.0
     two = global_align(depths[:2], focal, pairs[:1], config)
-    two_moves = turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], config)
+    two_moves = focal_probe(two, depths[:2], focal, pairs[:1], config).moves
     assert two_moves[0, 1] > 3 * np.nanmax(moves)  # measured 11.1 against 0.62 (4.1 before the shorter probe)
-    assert turn_sensitivity_deg(two, depths[:2], focal, pairs[:1], GlobalAlignConfig(optimize_focal=False)) is None
+    assert focal_probe(two, depths[:2], focal, pairs[:1], GlobalAlignConfig(optimize_focal=False)) is None
     unreached = global_align(depths, focal, pairs[:1], config)  # view 2 has no pair
-    assert np.isnan(turn_sensitivity_deg(unreached, depths, focal, pairs[:1], config)[0, 2])
+    assert np.isnan(focal_probe(unreached, depths, focal, pairs[:1], config).moves[0, 2])
 
 
 def test_the_focal_probe_says_when_the_photos_do_not_hold_the_focal(capture, monkeypatch):

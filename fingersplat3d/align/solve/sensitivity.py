@@ -36,8 +36,7 @@ from ...rotations import rotation_angle
 from ...segment.silhouette import widest_disc
 from .global_opt import GlobalAlignConfig, GlobalAlignment, PairCorrespondences, global_align
 
-__all__ = ["FOCAL_STEP", "FLAT_LOSS_RISE", "PERSPECTIVE_STEP", "EXCLUDED_LOSS_RISE", "FocalProbe", "focal_probe",
-           "turn_sensitivity_deg"]
+__all__ = ["FOCAL_STEP", "FLAT_LOSS_RISE", "PERSPECTIVE_STEP", "EXCLUDED_LOSS_RISE", "FocalProbe", "focal_probe"]
 
 FOCAL_STEP = 0.10
 """The focal probe: the focal held this much longer than solved (a share)."""
@@ -143,11 +142,3 @@ def focal_probe(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_
     moves[~aligned, :] = np.nan
     moves[:, ~aligned] = np.nan
     return FocalProbe(moves, rise, shorter, shorter_rise)
-
-
-def turn_sensitivity_deg(alignment: GlobalAlignment, depths: Sequence[np.ndarray], focal_guess,
-                         pairs: Sequence[PairCorrespondences], config: GlobalAlignConfig,
-                         min_turns: np.ndarray | None = None) -> np.ndarray | None:
-    """``[N, N]`` degrees: :attr:`FocalProbe.moves` of :func:`focal_probe`; None when the focal is held anyway."""
-    probe = focal_probe(alignment, depths, focal_guess, pairs, config, min_turns)
-    return None if probe is None else probe.moves
