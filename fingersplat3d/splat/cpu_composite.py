@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit, prange
 
 from .cpu_lanes import LANE_KERNELS
+from .cpu_project import alpha_q_max
 from .cpu_tile_math import (A, B, C, EA, EB, EC, EXPONENT_RANGE, FEATS, MX, MY, O, QMAX, TILE, X0, X1, Y0, Y1,
                             conic_terms, falloff_exact, falloff_start, load_pair, quadratic_at, tile_rect)
 from .project import ALPHA_MAX, ALPHA_MIN
@@ -63,15 +64,20 @@ def prepare(order, means2d, conics, opacities, boxes, feats):
 
     The records are made in the inputs' order, each written straight to its row in depth order (one
     cache line a record): made in depth order, every record gathered from six arrays at random, 3-4
-    times slower at 200k Gaussians; made in index order and then moved whole, one pass more."""
+    times slower at 200k Gaussians; made in index order and then moved whole, one pass more. The
+    logarithm and exponentials come from numpy's vectorised ones, computed first for all Gaussians:
+    numba calls the scalar ones, four a Gaussian, most of this pass's time."""
     row = np.full(means2d.shape[0], -1, np.int64)
     row[order] = np.arange(order.shape[0])
-    return _records(means2d, conics, opacities, boxes, feats, row, order.shape[0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        exps = np.exp(-conics.astype(np.float64))  # used only where every exponent is in range (_records)
+    return _records(means2d, conics, opacities, boxes, feats, alpha_q_max(opacities), exps, row, order.shape[0])
 
 
 @njit(cache=True, parallel=True)
-def _records(means2d, conics, opacities, boxes, feats, row, drawn):
-    """:func:`prepare`'s records, Gaussian g's at ``row[g]`` (``drawn`` rows; a Gaussian at -1 is not drawn)."""
+def _records(means2d, conics, opacities, boxes, feats, q_max, exps, row, drawn):
+    """:func:`prepare`'s records, Gaussian g's at ``row[g]`` (``drawn`` rows; a Gaussian at -1 is not drawn);
+    ``q_max`` from :func:`alpha_q_max`, ``exps`` = exp(-conics)."""
     n_feats = feats.shape[1]
     records = np.empty((drawn, FEATS + n_feats), feats.dtype)
     for g in prange(means2d.shape[0]):
@@ -81,7 +87,7 @@ def _records(means2d, conics, opacities, boxes, feats, row, drawn):
         mx, my = float(means2d[g, 0]), float(means2d[g, 1])
         a, b, c, o = float(conics[g, 0]), float(conics[g, 1]), float(conics[g, 2]), float(opacities[g])
         records[r, MX], records[r, MY], records[r, A], records[r, B], records[r, C], records[r, O] = mx, my, a, b, c, o
-        records[r, QMAX] = 2.0 * math.log(o / ALPHA_MIN) * (1.0 + 1e-4) + 1e-4 if o > ALPHA_MIN else -1.0
+        records[r, QMAX] = q_max[g]
         # Largest exponent magnitude over the box: q (convex) and the two linear steps peak at corners.
         largest = 0.0
         for cx in (boxes[g, 0], boxes[g, 2]):
@@ -92,9 +98,9 @@ def _records(means2d, conics, opacities, boxes, feats, row, drawn):
                 step_y = c * (2.0 * dy + 1.0) + 2.0 * b * dx
                 largest = max(largest, abs(q), abs(step_x), abs(step_y), abs(a), abs(b), abs(c))
         incremental = largest < EXPONENT_RANGE
-        records[r, EA] = math.exp(-a) if incremental else 0.0
-        records[r, EB] = math.exp(-b) if incremental else 0.0
-        records[r, EC] = math.exp(-c) if incremental else 0.0
+        records[r, EA] = exps[g, 0] if incremental else 0.0
+        records[r, EB] = exps[g, 1] if incremental else 0.0
+        records[r, EC] = exps[g, 2] if incremental else 0.0
         for k in range(4):
             records[r, X0 + k] = boxes[g, k]
         for f in range(n_feats):

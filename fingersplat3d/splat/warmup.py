@@ -16,7 +16,7 @@ from typing import Callable
 __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
 KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
-                "cpu_project": ("project_forward", "project_backward")}
+                "cpu_project": ("_forward_kernel", "_forward_lanes", "project_backward", "_backward_lanes")}
 MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~50 s; cached on disk)"
 _warm = False
 
