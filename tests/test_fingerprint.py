@@ -4,7 +4,7 @@ import pytest
 
 from fingersplat3d.align.correspond.texture import estimate_ridge_period
 from fingersplat3d.errors import InputError
-from fingersplat3d.eval.contact import MAX_SIZE, TARGET_PERIOD_PX, contact_like
+from fingersplat3d.eval.contact import MAX_SIZE, TARGET_PERIOD_PX, ContactImage, contact_like
 from fingersplat3d.eval.verification import det_curve, equal_error_rate, error_rates, fnmr_at_fmr, fmr_resolution
 from fingersplat3d.synth import SynthConfig, synthesize
 
@@ -92,10 +92,23 @@ def test_a_print_nfiq2_cannot_score_is_a_recorded_failure(uwa640):
     tiny = contact_like(view.image, view.mask, period_px=60.0)  # shrunk far below NFIQ2's 197 px
     result = analyse(tiny)
     assert result.nfiq2 is None and "NFIQ2" in result.failure
-    flat = contact_like(np.full_like(view.image, 0.5), view.mask)  # no ridges at all
-    blank = analyse(flat)
+    blank = analyse(ContactImage.of_print(np.full((400, 300), 128, np.uint8)))  # a print with no ridges, given as one
     assert blank.nfiq2 is None or blank.nfiq2 < 10
     assert match_score(blank, blank) >= 0
+
+
+@pytest.mark.parametrize("blur", [0.0, 6.0])
+def test_a_photo_without_ridges_makes_no_print(uwa640, blur):
+    """A flat finger, or one blurred beyond its ridges (σ 6 px on a ~9 px period), is refused with one sentence;
+    the same photo sharp makes a print."""
+    import cv2
+
+    view = uwa640.views[1]
+    sharp = contact_like(view.image, view.mask)
+    assert (sharp.image < 255).sum() > 10_000
+    flat = np.full_like(view.image, 0.5) if blur == 0 else cv2.GaussianBlur(view.image, (0, 0), blur)
+    with pytest.raises(InputError, match="no ridges"):
+        contact_like(flat, view.mask)
 
 
 def test_error_rates_on_hand_counted_scores():

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
+from ..align.correspond.texture import as_gray, measure_ridge_period, ridge_area, ridge_texture
 from ..errors import InputError
 
 __all__ = ["ContactImage", "contact_like", "TARGET_PERIOD_PX", "MAX_SIZE", "MIN_SIDE"]
@@ -37,6 +37,11 @@ MAX_SIZE = (799, 999)  # NFIQ2's largest width and height after white borders ar
 MIN_SIDE = 197  # NFIQ2's smallest width and height
 MARGIN = 8  # white pixels around the print (mindtct ignores a border of blocks)
 GRAY, SWING = 128.0, 48.0  # print level of the mean skin and of one local RMS of ridge texture
+MIN_RIDGES_ACROSS = 18.0
+"""A finger is at least this many ridge periods wide: measured 28-48 on the real dev captures, the IMPOSE renders and
+the synthetic samples (an adult finger 14-22 mm wide, ridges 0.4-0.55 mm apart). A coarser 'period' is the skin's
+shading or blur, not ridges: a photo blurred beyond its ridges (σ 6 px on a 14 px period) reads 33 px on a finger
+525 px wide (16 across)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,7 +91,7 @@ def contact_like(image: np.ndarray, mask: np.ndarray, *, ridges: str = "bright",
     if mask.sum() < 64:
         raise InputError("the finger mask is empty: there is no finger to make a print of")
     area = ridge_area(mask) & mask
-    period = float(period_px) if period_px is not None else estimate_ridge_period(gray, area)
+    period = float(period_px) if period_px is not None else _ridge_period(gray, mask, area)
     texture = ridge_texture(gray, area, period)
     sign = -1.0 if ridges == "bright" else 1.0
     ink = np.clip(GRAY + sign * SWING * texture, 0.0, 254.0)
@@ -96,6 +101,21 @@ def contact_like(image: np.ndarray, mask: np.ndarray, *, ridges: str = "bright",
     inside = cv2.warpAffine(area.astype(np.float32), affine, size, flags=cv2.INTER_LINEAR, borderValue=0.0) > 0.5
     printed = np.where(inside, np.rint(printed), 255).astype(np.uint8)
     return ContactImage(printed, affine, period, TARGET_PERIOD_PX / period)
+
+
+def _ridge_period(gray: np.ndarray, mask: np.ndarray, area: np.ndarray) -> float:
+    """The ridge period of the finger's ridge area; an InputError where it shows no ridges (blank, out of focus,
+    blurred beyond the ridges, or too small to measure)."""
+    from ..segment.silhouette import widest_disc
+
+    period = measure_ridge_period(gray, area)
+    if period is None:
+        raise InputError("no ridges found on the finger (out of focus, blurred or too small to measure): no print")
+    width = widest_disc(mask)
+    if width > 0 and width / period < MIN_RIDGES_ACROSS:
+        raise InputError(f"no ridges on the finger: its finest pattern repeats every {period:.0f} px, where a finger "
+                         f"{width:.0f} px wide has ridges about {width / 35:.0f} px apart (out of focus or blurred)")
+    return period
 
 
 def _upright_affine(area: np.ndarray, scale: float) -> tuple[np.ndarray, tuple[int, int]]:
