@@ -18,7 +18,7 @@ import torch
 
 from .errors import InputError
 
-__all__ = ["resolve_device", "cpu_threads", "use_threads", "single_threaded"]
+__all__ = ["resolve_device", "cpu_threads", "numba_threads", "use_threads", "single_threaded"]
 
 
 def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
@@ -66,6 +66,19 @@ def cpu_threads() -> int:
     if quota is not None:
         cores = min(cores, max(1, math.floor(quota)))
     return max(1, cores)
+
+
+def numba_threads() -> int:
+    """Threads for the numba kernels (the rasterizer's, the alignment's normal matrix): :func:`cpu_threads`, capped at
+    numba's pool size, made numba's count for the next kernel. Called before each launch, it also sets numba's threading
+    layers' order before the first: OpenMP first (torch uses it too), then numba's own pool, TBB only when nothing else
+    loads (an old libtbb on the path would otherwise be tried first and rejected with a warning)."""
+    import numba
+
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+    threads = min(cpu_threads(), numba.config.NUMBA_NUM_THREADS)
+    numba.set_num_threads(threads)
+    return threads
 
 
 def use_threads(threads: int) -> None:

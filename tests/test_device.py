@@ -27,8 +27,7 @@ def test_use_threads_sets_torch_and_the_kernels_threads(monkeypatch):
     import torch
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from fingersplat3d.device import use_threads
-    from fingersplat3d.splat.cpu_raster import kernel_threads
+    from fingersplat3d.device import numba_threads, use_threads
 
     monkeypatch.setenv("FS3D_THREADS", "2")  # restored (removed) after the test
     before = torch.get_num_threads()
@@ -36,7 +35,7 @@ def test_use_threads_sets_torch_and_the_kernels_threads(monkeypatch):
     try:
         use_threads(1)
         assert os.environ["FS3D_THREADS"] == "1" and torch.get_num_threads() == 1
-        assert cpu_threads() == 1 and kernel_threads() == 1
+        assert cpu_threads() == 1 and numba_threads() == 1
         assert all(pool["num_threads"] == 1 for pool in threadpool_info() if pool["user_api"] == "blas")  # numpy's, scipy's
     finally:
         torch.set_num_threads(before)

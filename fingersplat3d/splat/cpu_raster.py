@@ -4,34 +4,21 @@
 ``world_to_cam`` and ``K``); :func:`composite_cpu` takes the screen-space Gaussians and the
 features to composite and returns the ``[H, W, F]`` image, differentiable w.r.t. means2d, conics,
 opacities and features, as :func:`.composite.composite_tiles` does. Threads: the project's one
-setting, :func:`fingersplat3d.device.cpu_threads`.
+setting, :func:`fingersplat3d.device.numba_threads`.
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 import torch
 from torch import Tensor
 from torch.autograd.function import once_differentiable
 
-from ..device import cpu_threads
+from ..device import numba_threads
 from .cpu_composite import TILE, bin_tiles, composite_backward, composite_forward, gather_pairs, prepare, reduce_pairs
 from .cpu_project import project_backward, project_forward
 from .project import Projection, near_in_dtype
 
-__all__ = ["composite_cpu", "kernel_threads", "project_cpu"]
-
-# OpenMP first (torch uses it too), then numba's own pool; TBB only when nothing else loads (an old
-# libtbb on the path would otherwise be tried first and rejected with a warning).
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
-
-
-def kernel_threads() -> int:
-    """Threads for the kernels: :func:`cpu_threads`, capped at numba's pool size."""
-    threads = min(cpu_threads(), numba.config.NUMBA_NUM_THREADS)
-    numba.set_num_threads(threads)
-    return threads
-
+__all__ = ["composite_cpu", "project_cpu"]
 
 def depth_order(depths: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Indices of the ``valid`` Gaussians front to back, ties in index order (a stable sort).
@@ -52,7 +39,7 @@ class _CompositeCPU(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d: Tensor, conics: Tensor, opacities: Tensor, feats: Tensor, boxes: Tensor,
                 valid: Tensor, depths: Tensor, width: int, height: int, min_transmittance: float) -> Tensor:
-        chunks = kernel_threads()
+        chunks = numba_threads()
         tiles_x, tiles_y = -(-width // TILE), -(-height // TILE)
         order = depth_order(_numpy(depths), _numpy(valid))
         records = prepare(order, _numpy(means2d), _numpy(conics), _numpy(opacities),
@@ -69,7 +56,7 @@ class _CompositeCPU(torch.autograd.Function):
     @once_differentiable
     def backward(ctx, grad_image: Tensor, grad_alpha: Tensor):
         starts, pairs, offsets, slots, final, consumed, width, height, tiles_x = ctx.state
-        chunks = kernel_threads()
+        chunks = numba_threads()
         pair_grads = composite_backward(starts, pairs, width, height, tiles_x, final, consumed, _numpy(grad_image),
                                         _numpy(grad_alpha), chunks)
         per_drawn = torch.from_numpy(reduce_pairs(pair_grads, offsets, slots)).to(grad_image.dtype)
@@ -100,7 +87,7 @@ class _ProjectCPU(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, world_to_cam: Tensor, K: Tensor,
                 width: int, height: int, near: float, low_pass: float):
-        kernel_threads()
+        numba_threads()
         camera = _camera_vector(world_to_cam, K)
         arrays = tuple(_numpy(t) for t in (means, quats, scales))
         means2d, conics, cov2d, depths, radii, valid, boxes = project_forward(*arrays, _numpy(opacities), camera, width,
@@ -117,7 +104,7 @@ class _ProjectCPU(torch.autograd.Function):
     @once_differentiable
     def backward(ctx, grad_means2d, grad_conics, grad_cov2d, grad_depths, *_):
         arrays, camera, width, height, low_pass, valid = ctx.state
-        kernel_threads()
+        numba_threads()
         chunks = 64  # camera gradient partial sums: a fixed count, so any thread count gives the same sums
         zeros = lambda t, shape: np.zeros(shape) if t is None else _numpy(t)  # noqa: E731
         n = arrays[0].shape[0]

@@ -1,6 +1,7 @@
 """Compile the CPU rasterizer's numba kernels ahead of the work, and say so when that takes a while.
 
-The kernels (:mod:`.cpu_composite`, :mod:`.cpu_project`) are compiled by numba on their first call and
+The kernels (:mod:`.cpu_composite`, :mod:`.cpu_project`, and the alignment's
+:mod:`~fingersplat3d.align.solve.normal_matrix`, ~1 s of it) are compiled by numba on their first call and
 cached on disk beside the modules, so only the first run after an install pays (~50 s on 2 cores).
 ``tools/install.sh`` runs ``python3 -m fingersplat3d.splat.warmup`` so that a fresh install compiles them
 once, up front. Otherwise, the splat stage calls :func:`ensure_compiled` before its first render: where no
@@ -16,15 +17,17 @@ from typing import Callable
 __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
 KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
-                "cpu_project": ("_forward_kernel", "_forward_lanes", "project_backward", "_backward_lanes")}
+                "cpu_project": ("_forward_kernel", "_forward_lanes", "project_backward", "_backward_lanes"),
+                "normal_matrix": ("_upper_gram",)}
 MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~50 s; cached on disk)"
 _warm = False
 
 
 def _kernels() -> list:
+    from ..align.solve import normal_matrix
     from . import cpu_composite, cpu_project
 
-    modules = {"cpu_composite": cpu_composite, "cpu_project": cpu_project}
+    modules = {"cpu_composite": cpu_composite, "cpu_project": cpu_project, "normal_matrix": normal_matrix}
     compositing = [kernel for pair in cpu_composite._KERNELS.values() for kernel in pair]
     return [getattr(modules[module], name) for module, names in KERNEL_NAMES.items() for name in names] + compositing
 
@@ -56,6 +59,11 @@ def warm_up() -> float:
         leaves = [leaf.clone().requires_grad_(True) for leaf in leaves]
         out = rasterize(*leaves, torch.eye(4), K, 32, 24, backend="numba")
         (out.color.sum() + out.depth.nan_to_num().sum()).backward()
+    import scipy.sparse as sparse
+
+    from ..align.solve.normal_matrix import normal_matrix
+
+    normal_matrix(sparse.eye(3, format="csr"))  # the alignment's Gauss-Newton matrix
     _warm = True
     return time.perf_counter() - start
 

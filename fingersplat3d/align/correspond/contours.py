@@ -62,8 +62,12 @@ def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, 
     height, width = mask_b.shape
     found_a, found_b, information = [], [], []
     rotation_b = camera_b.rotation
-    for station in stations:
-        near = np.flatnonzero(np.abs(s - station) <= 0.5 * STATION_STEP_PX)
+    by_s = np.argsort(s, kind="stable")  # each station's points by two binary searches, not a pass over all of them
+    lows = np.searchsorted(s[by_s], stations - 0.5 * STATION_STEP_PX - 1e-6, side="left")
+    highs = np.searchsorted(s[by_s], stations + 0.5 * STATION_STEP_PX + 1e-6, side="right")
+    for station, low, high in zip(stations, lows, highs):
+        near = np.sort(by_s[low:high])  # in index order, as the argmax below breaks ties by it
+        near = near[np.abs(s[near] - station) <= 0.5 * STATION_STEP_PX]  # the window's test itself, to the bit
         if not near.size:
             continue
         half, centre = frame.sections.at(np.array([station]))

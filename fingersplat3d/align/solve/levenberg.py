@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
+from .normal_matrix import normal_matrix
 from .row_jacobian import ROW_UNKNOWNS, row_residuals_and_derivatives
 
 __all__ = ["levenberg_marquardt", "damped_least_squares", "turn_uncertainty_deg"]
@@ -93,7 +94,7 @@ def damped_least_squares(system, loss, snapshot, step_to, iterations: int = 15, 
     damping = 1e-4
     for _ in range(iterations):
         residual, jacobian = system()
-        hessian = (jacobian.T @ jacobian).toarray()
+        hessian = normal_matrix(jacobian)
         gradient = jacobian.T @ residual
         diagonal = np.diag(hessian).copy()
         active = diagonal > 0
@@ -150,7 +151,7 @@ def turn_uncertainty_deg(problem, aligned) -> np.ndarray:
     focal trading against each other shows as a large value. NaN where a view is not ``aligned`` (the
     root is aligned and is the gauge: its rotation has no variance of its own)."""
     residual, jacobian = _system(problem)
-    hessian = (jacobian.T @ jacobian).toarray()
+    hessian = normal_matrix(jacobian)
     active = np.diag(hessian) > 0
     variance = float(residual @ residual) / max(jacobian.shape[0] - int(active.sum()), 1)
     covariance = np.zeros_like(hessian)
