@@ -17,9 +17,12 @@ Exit statuses of ``fs3d`` (documented in the README):
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
+from typing import Callable
 
-__all__ = ["FS3DError", "InputError", "InputNote", "input_error", "EXIT_INPUT", "EXIT_NOT_REGISTERED", "EXIT_INCOMPLETE"]
+__all__ = ["FS3DError", "InputError", "InputNote", "input_error", "run_script", "EXIT_INPUT", "EXIT_NOT_REGISTERED",
+           "EXIT_INCOMPLETE"]
 
 EXIT_INPUT = 2
 EXIT_NOT_REGISTERED = 3
@@ -44,3 +47,17 @@ class InputNote(UserWarning):
 def input_error(path: str | Path | None, problem: str) -> InputError:
     """Build an :class:`InputError` reading ``"<path>: <problem>"`` (or just the problem)."""
     return InputError(f"{path}: {problem}" if path is not None else problem)
+
+
+def run_script(main: Callable[[], int | None]) -> int:
+    """A tool script's ``main()`` ended as ``fs3d``'s commands end: bad input (an :class:`FS3DError`, a missing file)
+    is one sentence on stderr and exit 2, not a traceback; Ctrl-C is 130."""
+    name = Path(sys.argv[0]).stem
+    try:
+        return int(main() or 0)
+    except (FS3DError, FileNotFoundError, FileExistsError) as error:
+        print(f"{name}: error: {error}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return 130

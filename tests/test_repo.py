@@ -174,3 +174,15 @@ def test_every_tool_script_imports():
             assert hasattr(module, "main"), f"{script.name} has no main()"
     finally:
         sys.path.remove(str(tools))
+
+
+def test_a_tool_given_bad_input_says_so_in_one_sentence(tmp_path):
+    """Tool scripts end as fs3d's commands do (errors.run_script): bad input is one line on stderr and exit 2."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, str(ROOT / "tools" / "bench_real.py"), "--data", str(tmp_path)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr and done.stderr.strip().count("\n") == 0
+    assert done.stderr.startswith("bench_real: error:") and str(tmp_path) in done.stderr

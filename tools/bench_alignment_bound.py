@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval import depth_errors, relative_rotation_errors
 from fingersplat3d.pipeline import FuseConfig, fuse
 from fingersplat3d.pointmaps.base import Pointmap, register_backend
@@ -68,4 +69,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

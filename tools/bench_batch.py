@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from bench_real import DEFAULT_DATA  # tools/ is the script's folder
+from fingersplat3d.errors import run_script
 
 
 def _batch(args: list[str], env=None) -> float:
@@ -150,4 +151,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from fingersplat3d.errors import run_script
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "impose-dev"
 TRIPLETS = ((-13, 0, 14), (-18, 0, 23), (-45, -18, 14), (-13, 14, 48), (-38, 0, 48), (-45, 0, 47))
@@ -67,4 +68,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

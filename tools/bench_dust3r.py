@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval.machine import machine
 from fingersplat3d.pointmaps.dust3r import Dust3rBackend, Dust3rNet, parse_model_description
 from fingersplat3d.scene import View  # noqa: E402
@@ -91,4 +92,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

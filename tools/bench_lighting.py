@@ -13,6 +13,7 @@ import argparse
 import sys
 
 import numpy as np
+from fingersplat3d.errors import run_script
 
 
 def shaded(view, low: float) -> np.ndarray:
@@ -53,4 +54,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

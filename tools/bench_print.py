@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from fingersplat3d.errors import run_script
 
 
 def main() -> int:
@@ -102,4 +103,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

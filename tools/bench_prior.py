@@ -34,6 +34,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.pointmaps.prior import PriorBackend, finger_height, height_to_points
 from fingersplat3d.segment.masks import finger_mask, mask_iou
 from fingersplat3d.synth import SynthConfig, synthesize
@@ -294,4 +295,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -24,11 +24,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import time
 from pathlib import Path
 
 import torch
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval.machine import machine
 from fingersplat3d.splat import matrix_to_quaternion, rasterize
 from fingersplat3d.splat.binning import bin_gaussians
@@ -181,4 +183,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

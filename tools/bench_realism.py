@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from fingersplat3d.errors import run_script
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = {"skin": "skin level", "background": "background", "noise": "noise", "ridge_contrast": "ridge contrast",
@@ -59,4 +60,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -30,6 +30,7 @@ import numpy as np
 
 from bench_real import DEFAULT_DATA  # tools/ is the script's folder
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.experiments.real import leave_one_view_out, texture_check
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
@@ -169,4 +170,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

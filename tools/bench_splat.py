@@ -33,6 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval.machine import machine
 from fingersplat3d.experiments.bench import HELD_OUT
 from fingersplat3d.experiments.geometry import RING_VIEWS, synth_captures
@@ -210,4 +211,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -31,6 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval.machine import machine
 from fingersplat3d.experiments.process import peak_rss_mb
 
@@ -449,4 +450,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

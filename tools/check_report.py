@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from fingersplat3d.batch.results import browser_check, find_browser
+from fingersplat3d.errors import run_script
 
 
 def main() -> int:
@@ -32,4 +33,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

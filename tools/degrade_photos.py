@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from fingersplat3d.errors import run_script
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 
@@ -55,4 +56,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.pointmaps.dust3r import load_model, prepare_image
 
 TINY = "enc_embed_dim=64, enc_depth=3, enc_num_heads=4, dec_embed_dim=48, dec_depth=10, dec_num_heads=3"
@@ -269,4 +270,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

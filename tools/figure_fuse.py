@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval import align_scale_shift, depth_errors
 from fingersplat3d.io import depth_colormap, read_capture, write_image
 from fingersplat3d.pipeline import FuseConfig, fuse
@@ -57,4 +58,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

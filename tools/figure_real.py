@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.eval.poses import rotation_angle_deg
 from fingersplat3d.io import depth_colormap, write_image
 from fingersplat3d.io.datasets import load_uwa
@@ -55,4 +56,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.io.capture import write_capture
 from fingersplat3d.synth import SynthConfig, synthesize
 
@@ -35,4 +36,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

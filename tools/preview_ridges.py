@@ -8,12 +8,14 @@ its angle (pointing away from the stem); cores are green circles, deltas magenta
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from fingersplat3d.errors import run_script
 from fingersplat3d.synth.ridges import BIFURCATION, PATTERN_CLASSES, RidgePattern, make_ridge_pattern
 
 ENDING_BGR, BIFURCATION_BGR = (40, 40, 230), (230, 120, 20)
@@ -78,4 +80,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))
