@@ -22,7 +22,7 @@ from .align.register import RegistrationConfig, register_views
 from .align.solve.global_opt import GlobalAlignment, global_align
 from .align.solve.icp import ICPConfig, refine_poses
 from .align.solve.rig import Rig, RigCapture
-from .align.transfer import MIN_PARALLAX_DEG, multi_view_support
+from .align.transfer import MIN_PARALLAX_DEG, multi_view_backing, multi_view_support
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
@@ -671,6 +671,22 @@ def write_reconstruction_files(result: Reconstruction, temporary: Path) -> None:
         from .mesh import write_mesh
 
         write_mesh(temporary / "mesh.ply", result.mesh)
+    _write_overview(result, temporary / "overview.png")
     report = dict(result.report)
     report["stages"] = {**report.get("stages", {}), "write": {"seconds": round(time.perf_counter() - started, 3)}}
     write_report(temporary / "report.json", report)
+
+
+def _write_overview(result: Reconstruction, path: Path) -> None:
+    """``overview.png``: what the fuse found, at a glance (:func:`~fingersplat3d.viz.fuse_overview`)."""
+    from .io.images import write_image
+    from .viz import TILE_HEIGHT, fuse_overview
+
+    alignment = result.report.get("alignment", {})
+    placed = alignment.get("aligned", {})
+    aligned = [bool(placed.get(view.name, True)) for view in result.capture.views]
+    tallest = max(depth.shape[0] for depth in result.depths)
+    backing = multi_view_backing(result.depths, result.cameras, aligned, stride=max(2, tallest // TILE_HEIGHT))
+    picture = fuse_overview([view.image for view in result.capture.views], result.capture.names, result.cameras,
+                            backing, alignment)
+    write_image(path, picture.astype(np.float32) / 255.0)

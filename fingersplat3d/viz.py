@@ -1,4 +1,4 @@
-"""Pictures people look at: contact sheets of captures with masks, depth and minutiae."""
+"""Pictures people look at: contact sheets of captures with masks, depth and minutiae; what a fuse found."""
 from __future__ import annotations
 
 import cv2
@@ -7,7 +7,7 @@ import numpy as np
 from .io.depth import depth_colormap
 from .scene import Capture
 
-__all__ = ["contact_sheet", "draw_minutiae", "gray8", "side_by_side"]
+__all__ = ["TILE_HEIGHT", "contact_sheet", "draw_minutiae", "fuse_overview", "gray8", "side_by_side"]
 
 _ENDING = (230, 60, 40)
 _BIFURCATION = (40, 120, 240)
@@ -75,3 +75,124 @@ def contact_sheet(capture: Capture, minutiae: dict | None = None, tile_width: in
     width = max(row.shape[1] for row in rows)
     rows = [np.pad(row, ((0, 4), (0, width - row.shape[1]), (0, 0))) for row in rows]
     return np.concatenate(rows, axis=0)
+
+
+_BACKED = np.array([60, 200, 90], np.float64)  # skin a second view also sees: shape from the photos
+_ONE_VIEW = np.array([245, 160, 40], np.float64)  # skin only this view sees: the pointmap's guess
+_NOT_PLACED = (215, 40, 40)
+TILE_HEIGHT = 360
+"""Rows of a photo in :func:`fuse_overview`."""
+_CAPTION = 44
+_PER_ROW = 5  # tiles a row: ten views (a CFPose capture) make two rows
+
+
+def _caption(tile: np.ndarray, lines: list[str], colour=(30, 30, 30)) -> np.ndarray:
+    """``tile`` under a white strip holding up to two lines of text."""
+    strip = np.full((_CAPTION, tile.shape[1], 3), 255, np.uint8)
+    for row, line in enumerate(lines[:2]):
+        cv2.putText(strip, line, (6, 18 + 20 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv2.LINE_AA)
+    return np.vstack([strip, tile])
+
+
+def _view_tile(image: np.ndarray, backing: np.ndarray | None) -> np.ndarray:
+    """The photo, its skin a second view backs tinted green, the skin only it sees amber (``backing`` from
+    :func:`~fingersplat3d.align.transfer.multi_view_backing`, any stride; None: not placed, a red frame)."""
+    scale = TILE_HEIGHT / image.shape[0]
+    size = (max(1, round(image.shape[1] * scale)), TILE_HEIGHT)
+    tile = cv2.resize(_to_rgb8(image), size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+    if backing is None:
+        cv2.rectangle(tile, (0, 0), (tile.shape[1] - 1, tile.shape[0] - 1), _NOT_PLACED, 6)
+        return tile
+    tinted = tile.astype(np.float64)
+    backing = cv2.resize(backing, size, interpolation=cv2.INTER_NEAREST)
+    for value, colour in ((1, _BACKED), (0, _ONE_VIEW)):
+        tinted[backing == value] = 0.55 * tinted[backing == value] + 0.45 * colour
+    return tinted.astype(np.uint8)
+
+
+def _rig_tile(cameras: list, names: list[str], aligned: list[bool], size: int = 300) -> np.ndarray | None:
+    """The placed cameras seen along the finger (the normal of the plane their optical axes span), around the point
+    nearest to all their axes; None with fewer than two placed cameras or axes all parallel."""
+    placed = [k for k, ok in enumerate(aligned) if ok]
+    if len(placed) < 2:
+        return None
+    centres = np.stack([cameras[k].center for k in placed])
+    axes = np.stack([cameras[k].rotation.T @ np.array([0.0, 0.0, 1.0]) for k in placed])
+    singular, basis = np.linalg.svd(axes)[1:]
+    if singular[1] < 1e-3 * singular[0]:
+        return None
+    along = basis[-1] if len(placed) > 2 else np.cross(axes[0], axes[1]) / np.linalg.norm(np.cross(axes[0], axes[1]))
+    # the point nearest to every optical axis (least squares), where the finger sits
+    projectors = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
+    middle = np.linalg.lstsq(projectors.sum(0), np.einsum("kij,kj->i", projectors, centres), rcond=None)[0]
+    right = axes[0] - (axes[0] @ along) * along
+    right /= np.linalg.norm(right)
+    up = np.cross(along, right)
+    flat = np.stack([(centres - middle) @ right, (centres - middle) @ up], 1)
+    reach = max(float(np.abs(flat).max()), 1e-12)
+    to_pixels = lambda xy: tuple(int(v) for v in np.round(size / 2 + xy * (0.38 * size / reach)))  # noqa: E731
+    tile = np.full((size, size, 3), 255, np.uint8)
+    cv2.circle(tile, to_pixels(np.zeros(2)), max(4, size // 20), (200, 170, 150), -1, cv2.LINE_AA)
+    for k, xy in zip(placed, flat):
+        cv2.line(tile, to_pixels(xy), to_pixels(np.zeros(2)), (170, 170, 170), 1, cv2.LINE_AA)
+        cv2.circle(tile, to_pixels(xy), 6, (40, 80, 200), -1, cv2.LINE_AA)
+        outward = xy / max(float(np.linalg.norm(xy)), 1e-12)  # the name beyond the camera, away from the finger
+        (width, height), _ = cv2.getTextSize(names[k], cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        x, y = to_pixels(xy)
+        x, y = int(x + 14 * outward[0] - width * (outward[0] < -0.3) - width / 2 * (abs(outward[0]) <= 0.3)), \
+            int(y + 14 * outward[1] + height * (outward[1] > 0.3) + height / 2 * (abs(outward[1]) <= 0.3))
+        cv2.putText(tile, names[k], (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (30, 30, 30), 1, cv2.LINE_AA)
+    return tile
+
+
+def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, backing: list[np.ndarray | None],
+                  alignment: dict) -> np.ndarray:
+    """``fs3d fuse``'s picture of what it found (RGB uint8): each photo, the skin a second view backs green and the
+    skin only it sees amber (there the shape is the pointmap's guess), a view not placed framed red; the placed
+    cameras seen along the finger; each turn between views and how far it moves with the focal 10 % off, and a
+    warning where the photos do not hold the focal (``alignment``: report.json's)."""
+    from .eval.poses import rotation_angle_deg
+
+    aligned = [backing_map is not None for backing_map in backing]
+    shares = alignment.get("backed_by_two_views", {})
+    tiles = []
+    for image, name, backing_map in zip(images, names, backing):
+        share = shares.get(name)
+        words = ([f"{name}: not registered"] if backing_map is None else
+                 [name, f"{100 * share:.0f} % backed by a second view" if share is not None else ""])
+        tiles.append(_caption(_view_tile(image, backing_map), words, _NOT_PLACED if backing_map is None else (30, 30, 30)))
+    rig = _rig_tile(cameras, names, aligned)
+    if rig is not None:
+        moves = alignment.get("turn_sensitivity_deg", {})
+        lines = []
+        for a in range(len(names)):
+            for b in range(a + 1, len(names)):
+                if aligned[a] and aligned[b]:
+                    pair = f"{names[a]}-{names[b]}"
+                    angle = rotation_angle_deg(cameras[a].rotation, cameras[b].rotation)
+                    lines.append(f"{pair}: {angle:.1f} deg" + (f", moves {moves[pair]:.1f} with the focal 10% off"
+                                                                if moves.get(pair) is not None else ""))
+        if alignment.get("focal_probe", {}).get("held") is False:
+            lines.append("the photos do not hold the focal: give --focal-px")
+        text = np.full((20 * min(len(lines), 6) + 8, rig.shape[1], 3), 255, np.uint8)
+        for row, line in enumerate(lines[:6]):
+            colour = _NOT_PLACED if line.startswith("the photos") else (30, 30, 30)
+            cv2.putText(text, line, (6, 16 + 20 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.42, colour, 1, cv2.LINE_AA)
+        tiles.append(_caption(np.vstack([rig, text]), ["the cameras seen along the finger", "turns between them"]))
+    rows = [_row(tiles[start:start + _PER_ROW]) for start in range(0, len(tiles), _PER_ROW)]
+    width = max(row.shape[1] for row in rows)
+    rows = [np.hstack([row, np.full((row.shape[0], width - row.shape[1], 3), 255, np.uint8)]) for row in rows]
+    legend = np.full((26, width, 3), 255, np.uint8)
+    cv2.putText(legend, "green: skin two views see (shape from the photos)   amber: one view only (shape guessed)   "
+                "red frame: not registered", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 60), 1, cv2.LINE_AA)
+    return np.vstack(rows + [legend])
+
+
+def _row(tiles: list[np.ndarray]) -> np.ndarray:
+    """Tiles side by side, top-aligned on white, 10 px apart."""
+    height = max(tile.shape[0] for tile in tiles)
+    parts = []
+    for tile in tiles:
+        parts += [np.vstack([tile, np.full((height - tile.shape[0], tile.shape[1], 3), 255, np.uint8)]),
+                  np.full((height, 10, 3), 255, np.uint8)]
+    return np.hstack(parts[:-1])

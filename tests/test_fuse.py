@@ -12,6 +12,7 @@ from fingersplat3d.errors import InputError
 from fingersplat3d.eval import depth_errors, relative_rotation_errors
 from fingersplat3d.eval.poses import rotation_angle_deg
 from fingersplat3d.io import read_cameras, read_depth
+from fingersplat3d.io.images import read_image
 from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
 from fingersplat3d.scene import Capture, View
 from fingersplat3d.synth import SynthConfig, synthesize
@@ -75,6 +76,8 @@ def test_reconstruction_folder_contract(reconstruction, tmp_path):
     for stage in ("masks", "pointmaps", "registration", "icp", "fusion"):
         assert report["stages"][stage]["seconds"] >= 0 and report["stages"][stage]["peak_rss_mb"] > 0
     assert report["units"] == "arbitrary" and report["alignment"]["residual_px"] < 3
+    overview = read_image(out / "overview.png")  # what the fuse found, at a glance: each view, the rig
+    assert overview.ndim == 3 and overview.shape[0] >= 360 and overview.shape[1] > 3 * 360
 
 
 def test_metric_hints_make_millimetres(uwa):

@@ -21,7 +21,7 @@ import numpy as np
 from ..sampling import sample_nearest
 from ..scene import Camera
 
-__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "transfer_points", "warp_image", "surface_tolerance", "multi_view_support"]
+__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "multi_view_support"]
 
 STATUSES = ("mapped", "off_surface", "outside", "hidden")
 TOLERANCE_FRACTION = 0.02
@@ -93,20 +93,21 @@ MIN_PARALLAX_DEG = 5.0
 target's order."""
 
 
-def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool],
-                       stride: int = 4, min_parallax_deg: float = MIN_PARALLAX_DEG) -> list[float | None]:
-    """Per view: the share of its surface (pixels with depth, every ``stride``-th row and column) that at
-    least one other aligned view also sees (:func:`transfer_points` says ``mapped`` and the other view has
-    depth there) from ``min_parallax_deg`` or more away (the angle between the two cameras' rays to the point).
-    Where no second view sees the skin from elsewhere, its shape is the pointmap's guess, not the photos'.
-    None for a view that is not aligned."""
-    shares: list[float | None] = []
+def multi_view_backing(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool], stride: int = 4,
+                       min_parallax_deg: float = MIN_PARALLAX_DEG) -> list[np.ndarray | None]:
+    """Per view, on every ``stride``-th row and column: ``1`` where its surface (a pixel with depth) is also seen by
+    another aligned view (:func:`transfer_points` says ``mapped`` and the other view has depth there) from
+    ``min_parallax_deg`` or more away (the angle between the two cameras' rays to the point), ``0`` where only this
+    view sees it (its shape there is the pointmap's guess, not the photos'), ``-1`` where it has no surface. int8
+    ``[ceil(H / stride), ceil(W / stride)]``; None for a view that is not aligned."""
+    maps: list[np.ndarray | None] = []
     least = np.cos(np.radians(min_parallax_deg))
     for a, (depth_a, camera_a) in enumerate(zip(depths, cameras)):
         if not aligned[a]:
-            shares.append(None)
+            maps.append(None)
             continue
-        rows, cols = np.nonzero(np.isfinite(depth_a[::stride, ::stride]))
+        sampled = depth_a[::stride, ::stride]
+        rows, cols = np.nonzero(np.isfinite(sampled))
         uv = np.stack([cols, rows], 1).astype(np.float64) * stride
         points = camera_a.unproject(uv, depth_a[rows * stride, cols * stride])
         ray_a = points - camera_a.center
@@ -121,5 +122,18 @@ def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned:
             ray_b = points - camera_b.center
             ray_b /= np.maximum(np.linalg.norm(ray_b, axis=1, keepdims=True), 1e-300)
             seen |= mapped & (np.sum(ray_a * ray_b, axis=1) <= least)
-        shares.append(float(seen.mean()) if len(uv) else 0.0)
+        backing = np.full(sampled.shape, -1, np.int8)
+        backing[rows, cols] = seen
+        maps.append(backing)
+    return maps
+
+
+def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool],
+                       stride: int = 4, min_parallax_deg: float = MIN_PARALLAX_DEG) -> list[float | None]:
+    """Per view: the share of its surface that a second view backs (:func:`multi_view_backing`); None for a view
+    that is not aligned."""
+    shares: list[float | None] = []
+    for backing in multi_view_backing(depths, cameras, aligned, stride, min_parallax_deg):
+        surface = None if backing is None else backing[backing >= 0]
+        shares.append(None if backing is None else float(surface.mean()) if surface.size else 0.0)
     return shares

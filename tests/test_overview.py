@@ -1,0 +1,57 @@
+"""fs3d fuse's overview picture (viz.fuse_overview): each view tinted by what backs its shape, the rig, the turns."""
+import numpy as np
+
+from fingersplat3d.scene import Camera
+from fingersplat3d.viz import TILE_HEIGHT, fuse_overview
+
+
+def _ring(count: int, step_deg: float = 45.0) -> list[Camera]:
+    """Cameras on a circle about the y axis, 100 units out, all looking at the origin."""
+    cameras = []
+    for k in range(count):
+        angle = np.radians(step_deg * (k - (count - 1) / 2))
+        rotation = np.array([[np.cos(angle), 0.0, -np.sin(angle)], [0.0, 1.0, 0.0], [np.sin(angle), 0.0, np.cos(angle)]])
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rotation, [0.0, 0.0, 100.0]
+        cameras.append(Camera.from_focal(500.0, 320, 240, pose))
+    return cameras
+
+
+def _pixels_near(picture: np.ndarray, colour) -> int:
+    return int((np.abs(picture.astype(int) - np.array(colour)).sum(2) < 40).sum())
+
+
+def test_views_tinted_by_backing_a_lost_view_framed_and_the_turns_written():
+    images = [np.full((240, 320), 0.5, np.float32) for _ in range(3)]
+    backing = [np.zeros((60, 80), np.int8), np.ones((60, 80), np.int8), None]  # one view alone, one backed, one lost
+    backing[0][:, :40] = -1  # no surface there: the photo as it is
+    alignment = {"backed_by_two_views": {"a": 0.0, "b": 1.0}, "turn_sensitivity_deg": {"a-b": 0.9},
+                 "focal_probe": {"held": False}}
+    cameras = _ring(3)
+    picture = fuse_overview(images, ["a", "b", "c"], cameras, backing, alignment)
+    assert picture.dtype == np.uint8 and picture.ndim == 3 and picture.shape[0] > TILE_HEIGHT
+    amber, green = _pixels_near(picture, (181, 142, 88)), _pixels_near(picture, (97, 160, 110))
+    red = _pixels_near(picture, (215, 40, 40))
+    assert amber > 0.45 * TILE_HEIGHT * 480  # the right half of view a (480 px wide): the skin only it sees
+    assert green > 0.9 * TILE_HEIGHT * 480  # view b, all backed
+    assert red > 4 * TILE_HEIGHT  # view c's frame, and the focal's warning
+    # With every view placed there is no red at all.
+    calm = fuse_overview(images, ["a", "b", "c"], cameras, [backing[1]] * 3, {})
+    assert _pixels_near(calm, (215, 40, 40)) == 0
+
+
+def test_one_view_or_parallel_cameras_give_no_rig_drawing_and_no_error():
+    images = [np.random.default_rng(0).random((100, 80))]
+    single = fuse_overview(images, ["only"], _ring(1), [np.ones((25, 20), np.int8)], {})
+    assert single.shape[1] < 2 * TILE_HEIGHT  # the photo alone, no rig tile
+    same = _ring(2, step_deg=0.0)  # two cameras looking the same way: no plane of axes to look along
+    picture = fuse_overview(images * 2, ["p", "q"], same, [np.ones((25, 20), np.int8)] * 2, {})
+    assert np.isfinite(picture).all() and picture.shape[1] < 3 * TILE_HEIGHT
+
+
+def test_ten_views_wrap_into_rows():
+    images = [np.full((240, 320), 0.5, np.float32)] * 10
+    picture = fuse_overview(images, [f"p{k}" for k in range(10)], _ring(10, step_deg=9.0),
+                            [np.ones((60, 80), np.int8)] * 10, {})
+    assert picture.shape[0] > 2 * TILE_HEIGHT + 26  # two rows of photos (five each) and the rig, and the legend
+    assert picture.shape[1] < 6 * 480 + 60  # at most five photos wide
