@@ -48,7 +48,7 @@ def test_batch_runs_records_failures_and_resumes(tmp_path, uwa640, ray_local, ca
     assert "1 of 2 captures failed" in capsys.readouterr().err
     assert not stale.exists() and not [p for p in out.iterdir() if ".tmp-" in p.name]
     good = out / "good"
-    for name in ("fused.ply", "cameras.json", "report.json", "batch.json", "depth", "thumbs"):
+    for name in ("fused.ply", "cameras.json", "report.json", "batch.json", "depth", "thumbs", "overview.png"):
         assert (good / name).exists(), name
     assert not (out / "broken").exists() and (out / ".failed" / "broken.json").is_file()
     rows = {row["capture"]: row for row in csv.DictReader(open(out / "results.csv"))}
@@ -58,6 +58,7 @@ def test_batch_runs_records_failures_and_resumes(tmp_path, uwa640, ray_local, ca
     page = _Images()
     page.feed((out / "report.html").read_text())
     assert page.rows == 3 and page.sources and all((out / src).is_file() for src in page.sources)
+    assert "good/overview.png" in page.sources  # each capture's row opens with what its fuse found
     from fingersplat3d.batch.results import browser_check, find_browser
 
     browser = find_browser()

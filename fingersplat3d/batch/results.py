@@ -58,9 +58,11 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def _images(out: Path, name: str) -> list[tuple[str, str]]:
-    """(relative path, caption) of the capture's thumbnails: photos, depth maps, a few novel views."""
+    """(relative path, caption) of the capture's thumbnails: the fuse's overview, photos, depth maps, a few novel
+    views."""
     folder = out / name
-    pictures = [(p, f"photo {p.stem}") for p in sorted((folder / "thumbs").glob("*.png"))]
+    pictures = [(folder / "overview.png", "overview")] if (folder / "overview.png").is_file() else []
+    pictures += [(p, f"photo {p.stem}") for p in sorted((folder / "thumbs").glob("*.png"))]
     pictures += [(p, f"depth {p.stem[:-6]}") for p in sorted((folder / "depth").glob("*_color.png"))]
     renders = sorted(p for p in (folder / "renders").glob("arc_*.png") if not p.stem.endswith("_alpha"))
     if renders:
