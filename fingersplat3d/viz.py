@@ -164,15 +164,17 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
     rig = _rig_tile(cameras, names, aligned)
     if rig is not None:
         moves = alignment.get("turn_sensitivity_deg", {})
+        held = alignment.get("focal_probe", {}).get("held") is not False
+        how = "with the focal 10% off" if held else "with the focal held shorter"  # the probe's (how sure it is)
         lines = []
         for a in range(len(names)):
             for b in range(a + 1, len(names)):
                 if aligned[a] and aligned[b]:
                     pair = f"{names[a]}-{names[b]}"
                     angle = rotation_angle_deg(cameras[a].rotation, cameras[b].rotation)
-                    lines.append(f"{pair}: {angle:.1f} deg" + (f", moves {moves[pair]:.1f} with the focal 10% off"
+                    lines.append(f"{pair}: {angle:.1f} deg" + (f", moves {moves[pair]:.1f} {how}"
                                                                 if moves.get(pair) is not None else ""))
-        if alignment.get("focal_probe", {}).get("held") is False:
+        if not held:
             lines.append("the photos do not hold the focal: give --focal-px")
         text = np.full((20 * min(len(lines), 6) + 8, rig.shape[1], 3), 255, np.uint8)
         for row, line in enumerate(lines[:6]):

@@ -9,7 +9,7 @@ import numpy as np
 
 __all__ = ["add", "run", "describe", "describe_reconstruction"]
 
-RECONSTRUCTION_FILES = ("fused.ply", "gaussians.ply", "mesh.ply", "depth", "report.json", "views")
+RECONSTRUCTION_FILES = ("fused.ply", "gaussians.ply", "mesh.ply", "depth", "report.json", "overview.png", "views")
 
 
 def add(commands) -> None:
