@@ -145,6 +145,22 @@ def _at_working_scale(capture: Capture, ridge_px: float | None, factor: float | 
     return Capture(tuple(photo), capture.metadata), Capture(tuple(working), capture.metadata), scale
 
 
+def _ridgeless(photos: Capture, scale: WorkingScale) -> list[str]:
+    """A sentence for each view whose photo shows no ridges (out of focus, blurred: its ridge period, measured for the
+    working resolution, is missing or coarser than a finger has; :func:`~.align.correspond.texture.no_ridges`): the
+    registration works on ridges, so such a view is unlikely to register, and the user should know why. None
+    measured (``--ridge-px 0``): no sentence."""
+    from .align.correspond.texture import no_ridges
+    from .segment.silhouette import widest_disc
+
+    said = []
+    for view, period in zip(photos.views, scale.view_periods_px):
+        why = no_ridges(period, widest_disc(view.mask))
+        if why is not None:
+            said.append(f"view {view.name!r}: {why}; the registration works on the ridges")
+    return said
+
+
 def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
     """``config`` with the alignment's robust scale made the working resolution's: the same share of a ridge period
     as at the resolution it was tuned at (:data:`~fingersplat3d.working_scale.TUNED_PX_PER_RIDGE`), so that the fit
@@ -605,6 +621,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                 mesh = mesh_from_cloud(cloud)
     finally:
         bar.close()  # before any message: an error is the last line the user sees
+    for message in _ridgeless(photos, scale):
+        _warn(report, message)
     support = multi_view_support(depths, cameras, [bool(a) for a in alignment.aligned])
     shares = [share for share in support if share is not None]
     if len(shares) >= 2 and max(shares) < NO_PARALLAX_SHARE:

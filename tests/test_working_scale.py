@@ -132,3 +132,19 @@ def test_the_measured_period_is_handed_on_only_when_it_is_the_registrations_own(
     _, _, scaled = working_views(uwa1280.views, 8.0)  # scaled: the registration measures it on its own images
     assert scaled.factor < 1 and scaled.working_period_px() is None
     assert working_views(uwa640.views, None)[2].working_period_px() is None  # nothing measured
+
+
+def test_a_view_blurred_beyond_its_ridges_is_named_and_the_sharp_ones_are_not(uwa1280):
+    """The fuse warns of a view whose photo shows no ridges (out of focus: the registration works on ridges); the
+    ridge periods are the working-resolution survey's, the rule is texture.no_ridges."""
+    from fingersplat3d.pipeline import _ridgeless
+
+    views = list(uwa1280.views)
+    views[1] = views[1].with_(image=cv2.GaussianBlur(views[1].image, (0, 0), 12.0))  # ~18 px ridges at 1280x1024
+    photos, _, scale = working_views(views)
+    said = _ridgeless(Capture(tuple(photos), {}), scale)
+    assert len(said) == 1 and repr(views[1].name) in said[0] and "no ridges" in said[0]
+    sharp, _, sharp_scale = working_views(uwa1280.views)
+    assert _ridgeless(Capture(tuple(sharp), {}), sharp_scale) == []
+    unmeasured, _, unmeasured_scale = working_views(views, ridge_px=None)  # --ridge-px 0: nothing measured, no word
+    assert _ridgeless(Capture(tuple(unmeasured), {}), unmeasured_scale) == []

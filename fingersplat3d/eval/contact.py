@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..align.correspond.texture import as_gray, measure_ridge_period, ridge_area, ridge_texture
+from ..align.correspond.texture import as_gray, measure_ridge_period, no_ridges, ridge_area, ridge_texture
 from ..errors import InputError
 
 __all__ = ["ContactImage", "contact_like", "TARGET_PERIOD_PX", "MAX_SIZE", "MIN_SIDE"]
@@ -37,11 +37,6 @@ MAX_SIZE = (799, 999)  # NFIQ2's largest width and height after white borders ar
 MIN_SIDE = 197  # NFIQ2's smallest width and height
 MARGIN = 8  # white pixels around the print (mindtct ignores a border of blocks)
 GRAY, SWING = 128.0, 48.0  # print level of the mean skin and of one local RMS of ridge texture
-MIN_RIDGES_ACROSS = 18.0
-"""A finger is at least this many ridge periods wide: measured 28-48 on the real dev captures, the IMPOSE renders and
-the synthetic samples (an adult finger 14-22 mm wide, ridges 0.4-0.55 mm apart). A coarser 'period' is the skin's
-shading or blur, not ridges: a photo blurred beyond its ridges (σ 6 px on a 14 px period) reads 33 px on a finger
-525 px wide (16 across)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,16 +100,13 @@ def contact_like(image: np.ndarray, mask: np.ndarray, *, ridges: str = "bright",
 
 def _ridge_period(gray: np.ndarray, mask: np.ndarray, area: np.ndarray) -> float:
     """The ridge period of the finger's ridge area; an InputError where it shows no ridges (blank, out of focus,
-    blurred beyond the ridges, or too small to measure)."""
+    blurred beyond the ridges, or too small to measure: :func:`~fingersplat3d.align.correspond.texture.no_ridges`)."""
     from ..segment.silhouette import widest_disc
 
     period = measure_ridge_period(gray, area)
-    if period is None:
-        raise InputError("no ridges found on the finger (out of focus, blurred or too small to measure): no print")
-    width = widest_disc(mask)
-    if width > 0 and width / period < MIN_RIDGES_ACROSS:
-        raise InputError(f"no ridges on the finger: its finest pattern repeats every {period:.0f} px, where a finger "
-                         f"{width:.0f} px wide has ridges about {width / 35:.0f} px apart (out of focus or blurred)")
+    why = no_ridges(period, widest_disc(mask))
+    if why is not None:
+        raise InputError(why + ": no print")
     return period
 
 

@@ -21,10 +21,15 @@ from ...errors import InputError
 from ...robust import robust_sigma
 
 __all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture",
-           "DEFAULT_PERIOD_PX"]
+           "DEFAULT_PERIOD_PX", "MIN_RIDGES_ACROSS", "no_ridges"]
 
 DEFAULT_PERIOD_PX = 8.0
 """Period returned when no ridge peak stands out (a featureless image)."""
+MIN_RIDGES_ACROSS = 18.0
+"""A finger is at least this many ridge periods wide: measured 28-48 on the real dev captures, the IMPOSE renders and
+the synthetic samples (an adult finger 14-22 mm wide, ridges 0.4-0.55 mm apart). A coarser 'period' is the skin's
+shading or blur, not ridges: a photo blurred beyond its ridges (σ 6 px on a 14 px period) reads 33 px on a finger
+525 px wide (16 across)."""
 _TILE = 96  # pixels per side of a spectrum tile (several ridge periods at any usual resolution)
 _FFT = 256  # padded size of the tile spectrum (frequency resolution)
 _MIN_PEAK_CONTRAST = 4.0  # a tile's peak must stand this far above its band's mean power
@@ -118,6 +123,18 @@ def measure_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_p
     order = np.argsort(periods)
     cumulative = np.cumsum(np.asarray(weights)[order])
     return float(np.asarray(periods)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+
+
+def no_ridges(period_px: float | None, finger_width_px: float) -> str | None:
+    """Why a finger ``finger_width_px`` wide (its widest disc) whose measured period is ``period_px`` (None or NaN:
+    no ridge peak) shows no ridges, in words; None when it shows them (:data:`MIN_RIDGES_ACROSS`)."""
+    if period_px is None or not np.isfinite(period_px):
+        return "no ridges found on the finger (out of focus, blurred or too small to measure)"
+    if finger_width_px > 0 and finger_width_px / period_px < MIN_RIDGES_ACROSS:
+        return (f"no ridges on the finger: its finest pattern repeats every {period_px:.0f} px, where a finger "
+                f"{finger_width_px:.0f} px wide has ridges about {finger_width_px / 35:.0f} px apart (out of focus or "
+                "blurred)")
+    return None
 
 
 def ridge_area(mask: np.ndarray) -> np.ndarray:
