@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from bench_real import DEFAULT_DATA  # tools/ is the script's folder
+
 from fingersplat3d.errors import run_script
 
 

@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 FRAMES = {"center": 0, "left": 1, "right": 2}

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "impose-dev"

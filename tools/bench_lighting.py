@@ -13,6 +13,7 @@ import argparse
 import sys
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 

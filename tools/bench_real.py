@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+
 from fingersplat3d.errors import run_script
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 ROOT = Path(__file__).resolve().parents[1]

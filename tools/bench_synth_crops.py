@@ -21,6 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
 from fingersplat3d.errors import run_script
 
 
