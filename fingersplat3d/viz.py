@@ -154,7 +154,7 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
     from .eval.poses import rotation_angle_deg
 
     aligned = [backing_map is not None for backing_map in backing]
-    shares = alignment.get("backed_by_two_views", {})
+    shares = alignment.get("backed_by_two_views") or {}
     tiles = []
     for image, name, backing_map in zip(images, names, backing):
         share = shares.get(name)
@@ -163,10 +163,10 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
         tiles.append(_caption(_view_tile(image, backing_map), words, _NOT_PLACED if backing_map is None else (30, 30, 30)))
     rig = _rig_tile(cameras, names, aligned)
     if rig is not None:
-        moves = alignment.get("turn_sensitivity_deg", {})
-        held = alignment.get("focal_probe", {}).get("held") is not False
+        moves = alignment.get("turn_sensitivity_deg") or {}
+        held = (alignment.get("focal_probe") or {}).get("held") is not False
         how = "with the focal 10% off" if held else "with the focal held shorter"  # the probe's (how sure it is)
-        lines = []
+        lines = [] if held else ["the photos do not hold the focal: give --focal-px"]  # first: never cut off
         for a in range(len(names)):
             for b in range(a + 1, len(names)):
                 if aligned[a] and aligned[b]:
@@ -174,8 +174,6 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
                     angle = rotation_angle_deg(cameras[a].rotation, cameras[b].rotation)
                     lines.append(f"{pair}: {angle:.1f} deg" + (f", moves {moves[pair]:.1f} {how}"
                                                                 if moves.get(pair) is not None else ""))
-        if not held:
-            lines.append("the photos do not hold the focal: give --focal-px")
         text = np.full((20 * min(len(lines), 6) + 8, rig.shape[1], 3), 255, np.uint8)
         for row, line in enumerate(lines[:6]):
             colour = _NOT_PLACED if line.startswith("the photos") else (30, 30, 30)
@@ -184,9 +182,12 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
     rows = [_row(tiles[start:start + _PER_ROW]) for start in range(0, len(tiles), _PER_ROW)]
     width = max(row.shape[1] for row in rows)
     rows = [np.hstack([row, np.full((row.shape[0], width - row.shape[1], 3), 255, np.uint8)]) for row in rows]
-    legend = np.full((26, width, 3), 255, np.uint8)
-    cv2.putText(legend, "green: skin two views see (shape from the photos)   amber: one view only (shape guessed)   "
-                "red frame: not registered", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 60), 1, cv2.LINE_AA)
+    keys = ["green: skin two views see (shape from the photos)", "amber: one view only (shape guessed)",
+            "red frame: not registered"]
+    lines = ["   ".join(keys)] if width >= 900 else keys  # a narrow picture (one photo) gets a line each
+    legend = np.full((8 + 18 * len(lines), width, 3), 255, np.uint8)
+    for row, line in enumerate(lines):
+        cv2.putText(legend, line, (6, 18 + 18 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (60, 60, 60), 1, cv2.LINE_AA)
     return np.vstack(rows + [legend])
 
 

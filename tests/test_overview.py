@@ -36,7 +36,8 @@ def test_views_tinted_by_backing_a_lost_view_framed_and_the_turns_written():
     assert green > 0.9 * TILE_HEIGHT * 480  # view b, all backed
     assert red > 4 * TILE_HEIGHT  # view c's frame, and the focal's warning
     # With every view placed there is no red at all.
-    calm = fuse_overview(images, ["a", "b", "c"], cameras, [backing[1]] * 3, {})
+    calm = fuse_overview(images, ["a", "b", "c"], cameras, [backing[1]] * 3,
+                         {"focal_probe": None, "turn_sensitivity_deg": None, "backed_by_two_views": None})
     assert _pixels_near(calm, (215, 40, 40)) == 0
 
 
