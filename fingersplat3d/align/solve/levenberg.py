@@ -21,7 +21,6 @@ import numpy as np
 import scipy.sparse as sparse
 import torch
 
-from .normal_matrix import normal_matrix
 from .row_jacobian import ROW_UNKNOWNS, row_residuals_and_derivatives
 
 __all__ = ["levenberg_marquardt", "damped_least_squares", "turn_uncertainty_deg"]
@@ -69,6 +68,13 @@ def _system(problem) -> tuple[np.ndarray, sparse.csr_matrix]:
     return np.concatenate([residual, prior_residual]), sparse.vstack([jacobian, prior_jacobian]).tocsr()
 
 
+def _normal_matrix(jacobian) -> np.ndarray:
+    """``JᵀJ``, dense (:mod:`.normal_matrix`, imported here: numba only loads when a fit runs, not for every command)."""
+    from .normal_matrix import normal_matrix
+
+    return normal_matrix(jacobian)
+
+
 def _solve_positive(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """``matrix^-1 rhs`` for the damped Gauss-Newton matrix, symmetric positive definite by construction: Cholesky
     (half an LU's work: 0.07 s against 0.13 s at ten views' 2,500 unknowns), LU where rounding leaves it not quite
@@ -94,7 +100,7 @@ def damped_least_squares(system, loss, snapshot, step_to, iterations: int = 15, 
     damping = 1e-4
     for _ in range(iterations):
         residual, jacobian = system()
-        hessian = normal_matrix(jacobian)
+        hessian = _normal_matrix(jacobian)
         gradient = jacobian.T @ residual
         diagonal = np.diag(hessian).copy()
         active = diagonal > 0
@@ -151,7 +157,7 @@ def turn_uncertainty_deg(problem, aligned) -> np.ndarray:
     focal trading against each other shows as a large value. NaN where a view is not ``aligned`` (the
     root is aligned and is the gauge: its rotation has no variance of its own)."""
     residual, jacobian = _system(problem)
-    hessian = normal_matrix(jacobian)
+    hessian = _normal_matrix(jacobian)
     active = np.diag(hessian) > 0
     variance = float(residual @ residual) / max(jacobian.shape[0] - int(active.sum()), 1)
     covariance = np.zeros_like(hessian)
