@@ -22,7 +22,7 @@ from .align.register import RegistrationConfig, register_views
 from .align.solve.global_opt import GlobalAlignment, global_align
 from .align.solve.icp import ICPConfig, refine_poses
 from .align.solve.rig import Rig, RigCapture
-from .align.transfer import MIN_PARALLAX_DEG, multi_view_backing, multi_view_support
+from .align.transfer import MIN_PARALLAX_DEG, backed_shares, multi_view_backing
 from .device import resolve_device
 from .errors import InputError
 from .scene import Camera, Capture, View
@@ -111,6 +111,10 @@ class Reconstruction:
     mesh: object | None = None
     gaussians: object | None = None  # fingersplat3d.splat.Gaussians (cleaned), when the splat stage ran
     splat_depths: list[np.ndarray] | None = None  # [H, W] expected depth of the Gaussians per view
+    backing: list[np.ndarray | None] | None = None
+    """Per view, where a second view backs its surface (:func:`~.align.transfer.multi_view_backing`, at the
+    resolution the geometry worked at; None for a view not aligned), as the report's shares were counted; None:
+    not computed (``overview.png`` then computes it)."""
 
     @property
     def registered(self) -> bool:
@@ -623,7 +627,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         bar.close()  # before any message: an error is the last line the user sees
     for message in _ridgeless(photos, scale):
         _warn(report, message)
-    support = multi_view_support(depths, cameras, [bool(a) for a in alignment.aligned])
+    backing = multi_view_backing(depths, cameras, [bool(a) for a in alignment.aligned])
+    support = backed_shares(backing)
     shares = [share for share in support if share is not None]
     if len(shares) >= 2 and max(shares) < NO_PARALLAX_SHARE:
         _warn(report, f"no two views see the finger from {MIN_PARALLAX_DEG:g}° or more apart (the same place, or the same "
@@ -638,7 +643,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         photos, scale, cameras, (depths, confidences, splat.depths if splat else None), report)
     report.update(stages=stages.records, units=units, scale_mm_per_unit=mm_per_unit, points=len(cloud.points))
     return Reconstruction(photos, cameras, depths, confidences, cloud, units, mm_per_unit, report, mesh,
-                          splat.gaussians if splat else None, splat_depths)
+                          splat.gaussians if splat else None, splat_depths, backing)
 
 
 def _orient_outward(cloud, cameras: list[Camera], views: list[int]) -> None:
@@ -701,10 +706,12 @@ def _write_overview(result: Reconstruction, path: Path) -> None:
     from .viz import TILE_HEIGHT, fuse_overview
 
     alignment = result.report.get("alignment", {})
-    placed = alignment.get("aligned", {})
-    aligned = [bool(placed.get(view.name, True)) for view in result.capture.views]
-    tallest = max(depth.shape[0] for depth in result.depths)
-    backing = multi_view_backing(result.depths, result.cameras, aligned, stride=max(2, tallest // TILE_HEIGHT))
+    backing = result.backing
+    if backing is None:  # a Reconstruction made elsewhere: the fuse's own maps are not there
+        placed = alignment.get("aligned", {})
+        aligned = [bool(placed.get(view.name, True)) for view in result.capture.views]
+        tallest = max(depth.shape[0] for depth in result.depths)
+        backing = multi_view_backing(result.depths, result.cameras, aligned, stride=max(2, tallest // TILE_HEIGHT))
     picture = fuse_overview([view.image for view in result.capture.views], result.capture.names, result.cameras,
                             backing, alignment)
     write_image(path, picture.astype(np.float32) / 255.0)

@@ -21,7 +21,8 @@ import numpy as np
 from ..sampling import sample_nearest
 from ..scene import Camera
 
-__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "multi_view_support"]
+__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "backed_shares",
+           "multi_view_support"]
 
 STATUSES = ("mapped", "off_surface", "outside", "hidden")
 TOLERANCE_FRACTION = 0.02
@@ -128,12 +129,18 @@ def multi_view_backing(depths: list[np.ndarray], cameras: list[Camera], aligned:
     return maps
 
 
+def backed_shares(backing: list[np.ndarray | None]) -> list[float | None]:
+    """Per view: the share of its surface a second view backs, from :func:`multi_view_backing`'s maps (0 for a view
+    with no surface); None for a view that is not aligned."""
+    shares: list[float | None] = []
+    for view in backing:
+        surface = None if view is None else view[view >= 0]
+        shares.append(None if view is None else float(surface.mean()) if surface.size else 0.0)
+    return shares
+
+
 def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool],
                        stride: int = 4, min_parallax_deg: float = MIN_PARALLAX_DEG) -> list[float | None]:
-    """Per view: the share of its surface that a second view backs (:func:`multi_view_backing`); None for a view
-    that is not aligned."""
-    shares: list[float | None] = []
-    for backing in multi_view_backing(depths, cameras, aligned, stride, min_parallax_deg):
-        surface = None if backing is None else backing[backing >= 0]
-        shares.append(None if backing is None else float(surface.mean()) if surface.size else 0.0)
-    return shares
+    """Per view: the share of its surface that a second view backs (:func:`multi_view_backing`,
+    :func:`backed_shares`); None for a view that is not aligned."""
+    return backed_shares(multi_view_backing(depths, cameras, aligned, stride, min_parallax_deg))

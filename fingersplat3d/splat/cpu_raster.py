@@ -20,6 +20,7 @@ from .project import Projection, near_in_dtype
 
 __all__ = ["composite_cpu", "project_cpu"]
 
+
 def depth_order(depths: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Indices of the ``valid`` Gaussians front to back, ties in index order (a stable sort).
     float32 depths (positive: drawn Gaussians are beyond the near plane) sort as one uint64 key,
