@@ -9,7 +9,8 @@ alignment and the splat fit; the outputs (cameras, depth maps, masks) are put ba
 * The finger mask is found on a *survey* copy of at most :data:`SURVEY_SIDE` pixels: the mask's morphology uses
   discs that grow with the image, so its cost grows with about the fourth power of the side.
 * The ridge period is measured on that copy, or, where the copy samples the ridges too coarsely to trust
-  (:data:`FINE_BELOW_PX`), on a crop of the finger at the photo's own resolution.
+  (:data:`FINE_BELOW_PX`) or the finger is too small on it to give tiles off its rims (:data:`SMALL_FINGER_PX`), on a
+  crop of the finger at the photo's own resolution.
 * ``factor = ridge_px / period`` (at most 1), one for every view of a capture (views that share a finger share
   its ridges); a factor above :data:`MIN_SHRINK` is not worth a resampling and stays 1, and no view's short side
   goes below :data:`MIN_SIDE`.
@@ -46,6 +47,9 @@ SURVEY_SIDE = 1280
 """Long side (pixels) at most of the copy the masks and the first ridge period are found on."""
 FINE_BELOW_PX = 6.0
 """A ridge period below this on the survey copy is measured again on a photo-resolution crop of the finger."""
+SMALL_FINGER_PX = 192
+"""A finger narrower than this on the survey copy (two of the period's 96-px tiles) is measured on the crop as well:
+its one or two tiles reach its rims, where shading can pass for a period above :data:`FINE_BELOW_PX`."""
 CROP_SIDE = 1024
 """Side (pixels) at most of that crop."""
 MIN_SHRINK = 0.8
@@ -134,9 +138,14 @@ def _photo_period(view: View, survey: _Survey) -> float:
     NaN when neither shows ridges."""
     factor, mask = survey.factor, survey.mask
     period = measure_ridge_period(survey.image, mask)
-    if factor == 1.0 or (period is not None and period >= FINE_BELOW_PX):
+    rows, cols = np.nonzero(mask)
+    small = rows.size == 0 or min(np.ptp(rows), np.ptp(cols)) + 1 < SMALL_FINGER_PX
+    seen = period is not None and period >= FINE_BELOW_PX
+    if factor == 1.0 or (seen and not small):
         return float("nan") if period is None else period / factor
-    rows, cols = np.nonzero(mask)  # centre of the finger: its ridges, away from the rims
+    if rows.size == 0:
+        return float("nan")
+    # centre of the finger: its ridges, away from the rims
     centre = np.array([np.median(cols), np.median(rows)]) / factor
     half = CROP_SIDE // 2
     left = int(np.clip(centre[0] - half, 0, max(0, view.width - CROP_SIDE)))
@@ -149,7 +158,9 @@ def _photo_period(view: View, survey: _Survey) -> float:
         crop_mask = cv2.warpAffine(mask.astype(np.float32), onto_survey, (width, height),
                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
     fine = measure_ridge_period(view.image[top:top + height, left:left + width], crop_mask)
-    return float("nan") if fine is None else fine
+    if fine is not None:
+        return fine
+    return period / factor if seen else float("nan")
 
 
 def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> float:
