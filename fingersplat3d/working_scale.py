@@ -138,13 +138,14 @@ def _photo_period(view: View, survey: _Survey) -> float:
     NaN when neither shows ridges."""
     factor, mask = survey.factor, survey.mask
     period = measure_ridge_period(survey.image, mask)
-    rows, cols = np.nonzero(mask)
-    small = rows.size == 0 or min(np.ptp(rows), np.ptp(cols)) + 1 < SMALL_FINGER_PX
+    if factor == 1.0:
+        return float("nan") if period is None else period
     seen = period is not None and period >= FINE_BELOW_PX
-    if factor == 1.0 or (seen and not small):
-        return float("nan") if period is None else period / factor
+    rows, cols = np.nonzero(mask)
     if rows.size == 0:
         return float("nan")
+    if seen and min(np.ptp(rows), np.ptp(cols)) + 1 >= SMALL_FINGER_PX:
+        return period / factor
     # centre of the finger: its ridges, away from the rims
     centre = np.array([np.median(cols), np.median(rows)]) / factor
     half = CROP_SIDE // 2

@@ -209,9 +209,6 @@ def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.
     gy = cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
     magnitude = cv2.magnitude(gx, gy)
     half_width = max(4.0, CREST_BAND * max(height, width))
-    sigma = max(2.0, 0.015 * max(height, width))
-    factor = max(1, int(sigma // 2))
-    coarse = (max(1, -(-width // factor)), max(1, -(-height // factor)))
     for _ in range(CREST_ROUNDS):
         mask8 = (smooth > threshold).view(np.uint8)
         inside = cv2.distanceTransform(mask8, cv2.DIST_L2, 3)
@@ -221,9 +218,8 @@ def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.
         if not peak > 0.0:
             break
         weight = np.where(band, magnitude / peak, 0.0).astype(np.float32) ** CREST_POWER
-        total = cv2.GaussianBlur(cv2.resize(weight * smooth, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
-        mass = cv2.GaussianBlur(cv2.resize(weight, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
-        before = cv2.resize(threshold, coarse, interpolation=cv2.INTER_AREA)
+        mass, total = _local_sums(weight, weight * smooth)
+        before = cv2.resize(threshold, mass.shape[::-1], interpolation=cv2.INTER_AREA)
         level = np.where(mass > 1e-3 * float(mass.max()), total / np.maximum(mass, 1e-30), before).astype(np.float32)
         threshold = np.maximum(floor, cv2.resize(level, (width, height), interpolation=cv2.INTER_LINEAR))
     return threshold
@@ -249,17 +245,24 @@ def _edge_midpoint(smooth: np.ndarray, region: np.ndarray, bg_level: float, floo
     if np.count_nonzero(band) < 16:
         return None
     height, width = smooth.shape
-    sigma = max(2.0, 0.015 * max(height, width))
-    factor = max(1, int(sigma // 2))
-    coarse = (max(1, -(-width // factor)), max(1, -(-height // factor)))
-    weight = cv2.resize(band, coarse, interpolation=cv2.INTER_AREA)
-    total = cv2.resize(band * smooth, coarse, interpolation=cv2.INTER_AREA)
-    weight = cv2.GaussianBlur(weight, (0, 0), sigma / factor)
-    total = cv2.GaussianBlur(total, (0, 0), sigma / factor)
+    weight, total = _local_sums(band, band * smooth)
     edge_level = float(total.sum() / max(weight.sum(), 1e-12))  # where no band is near
     local = np.where(weight > 1e-4, total / np.maximum(weight, 1e-4), edge_level).astype(np.float32)
     midpoint = np.maximum(floor, 0.5 * (bg_level + local))
     return cv2.resize(midpoint, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def _local_sums(weight: np.ndarray, weighted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian local sums (sigma ~1.5 % of the long side) of ``weight`` and ``weighted`` (weight times a value), on a
+    grid a few times coarser than the image, which is all such a smooth map needs: their ratio is the value's local
+    weighted mean. Both float32, the coarse grid's shape."""
+    height, width = weight.shape
+    sigma = max(2.0, 0.015 * max(height, width))
+    factor = max(1, int(sigma // 2))
+    coarse = (max(1, -(-width // factor)), max(1, -(-height // factor)))
+    mass = cv2.GaussianBlur(cv2.resize(weight, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
+    total = cv2.GaussianBlur(cv2.resize(weighted, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
+    return mass, total
 
 
 def _otsu(values: np.ndarray, low: float, high: float, bins: int = 256) -> float:
