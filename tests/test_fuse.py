@@ -337,16 +337,11 @@ def test_another_groups_crops_register_whole_or_cut_short(impose_dev, rows, tmp_
 def test_photos_on_a_bright_background_are_fused(uwa):
     """Phone-style photos: the finger on a bright desk, no dark background (segment/any_background.py). Measured
     with seed 1: masks IoU 0.99, pair rotations 0.3-0.7 degrees off, depth 0.07-0.13 mm (dark: 0.07-0.16)."""
-    import cv2
-
+    from fingersplat3d.experiments.backgrounds import bright_desk, on_background
     from fingersplat3d.segment.masks import mask_iou
 
     rng = np.random.default_rng(0)
-    views = []
-    for view in uwa.views:
-        soft = cv2.GaussianBlur(view.mask.astype(np.float32), (0, 0), 1.0)
-        desk = 0.82 + 0.03 * rng.normal(size=view.image.shape)
-        views.append(View(view.name, (soft * view.image + (1 - soft) * desk).clip(0, 1).astype(np.float32)))
+    views = [View(view.name, on_background(view.image, view.mask, bright_desk(view.image.shape, rng))) for view in uwa.views]
     result = fuse(Capture(tuple(views), uwa.metadata), GEOMETRY)
     assert result.registered
     assert all(mask_iou(found.mask, view.mask) > 0.95 for found, view in zip(result.capture.views, uwa.views))

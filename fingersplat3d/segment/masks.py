@@ -47,7 +47,7 @@ from ..errors import InputError
 from ..robust import robust_sigma
 from .regions import fill_holes
 
-__all__ = ["finger_mask", "mask_iou"]
+__all__ = ["finger_mask", "mask_iou", "outline_offset_px"]
 
 SMOOTH_SIGMA_PX = 1.0  # Gaussian pre-smoothing (pixels): averages noise, keeps the edge in place
 MIN_CONTRAST_SIGMAS = 6.0  # skin must stand this many background-noise sigmas above the background
@@ -125,6 +125,25 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
         raise ValueError(f"masks have different shapes {a.shape} and {b.shape}")
     union = np.count_nonzero(a | b)
     return 1.0 if union == 0 else np.count_nonzero(a & b) / union
+
+
+def outline_offset_px(found: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """How far ``found``'s outline lies from ``truth``'s, in pixels: the median signed distance of its outline pixels
+    from the true outline (positive outside the true mask: a mask too wide) and the 90th percentile of the distance.
+    NaN when either mask is empty."""
+    found, truth = np.asarray(found, bool), np.asarray(truth, bool)
+    if found.shape != truth.shape:
+        raise ValueError(f"masks have different shapes {found.shape} and {truth.shape}")
+    if not found.any() or not truth.any():
+        return float("nan"), float("nan")
+
+    def edge(mask: np.ndarray) -> np.ndarray:
+        return mask & ~cv2.erode(mask.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+
+    distance = cv2.distanceTransform((~edge(truth)).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    on = edge(found)
+    signed = np.where(truth[on], -distance[on], distance[on])
+    return float(np.median(signed)), float(np.percentile(np.abs(signed), 90))
 
 
 def _brightness(image: np.ndarray, name: str) -> np.ndarray:

@@ -1,0 +1,115 @@
+"""A finger on other backgrounds (phone photos): masks, and the registration of real captures on a bright desk.
+
+    python3 tools/bench_backgrounds.py [--seeds 3] [--real ../shared/data/uwa-real-dev] [--fuse 1_1_2_1,2_2_7_1]
+
+Masks: each view's finger composited onto each background of
+:data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS` (``fs3d synth`` uwa fingers at 640x512 against their true
+masks; the real dev views at 1280x1024 against their dark-background masks), then segmented from the composite alone.
+Per background and source: mask IoU median (min) and the outline's offset (median signed, positive = too wide; 90th
+percentile of its distance), px at the photo's size. ``--fuse``: those real captures fused (geometry only) from the
+bright-desk composites, each pair's turn against the same capture fused from its own photos. Markdown tables.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fingersplat3d.errors import run_script
+
+DEFAULT_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
+
+
+def _real_views(folder: Path) -> list:
+    from fingersplat3d.io.datasets import load_any
+
+    captures = sorted({path.name.rsplit("_", 1)[0] for path in folder.glob("*_*_*_*_[0-9].jpg")})
+    return [view for name in captures for view in
+            load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0].views]
+
+
+def _mask_rows(source: str, views, truths, rng) -> list[str]:
+    from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
+    from fingersplat3d.segment.masks import finger_mask, mask_iou, outline_offset_px
+
+    rows = []
+    for kind in BACKGROUNDS:
+        ious, offsets, far, seconds = [], [], [], []
+        for view, truth in zip(views, truths):
+            photo = on_background(view.image, truth, background(kind, view.image.shape, rng))
+            start = time.perf_counter()
+            try:
+                found = finger_mask(photo)
+            except Exception as error:  # noqa: BLE001 - a view with no finger found is a row's failure, not the bench's
+                print(f"  {source} {view.name} on {kind}: {error}", file=sys.stderr)
+                found = np.zeros_like(truth)
+            seconds.append(time.perf_counter() - start)
+            ious.append(mask_iou(found, truth))
+            offset, distance = outline_offset_px(found, truth)
+            offsets.append(offset)
+            far.append(distance)
+        rows.append(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(offsets):+.1f} | "
+                    f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+def _fuse_rows(folder: Path, captures: list[str], rng) -> None:
+    from fingersplat3d.eval.poses import relative_rotation_errors
+    from fingersplat3d.experiments.backgrounds import bright_desk, on_background
+    from fingersplat3d.io.datasets import load_any
+    from fingersplat3d.pipeline import FuseConfig, fuse
+    from fingersplat3d.scene import Capture, View
+
+    print("\n| capture (bright desk) | views registered | turn against its own photos' fuse 0-1 / 0-2 / 1-2 ° | "
+          "masks IoU against the photos' | geometry s |\n|---|---|---|---|---|")
+    from fingersplat3d.segment.masks import mask_iou
+
+    for name in captures:
+        capture = load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0]
+        own = fuse(capture, FuseConfig(splat=None))
+        desk = Capture(tuple(View(view.name, on_background(view.image, mask.mask, bright_desk(view.image.shape, rng)))
+                             for view, mask in zip(capture.views, own.capture.views)), capture.metadata)
+        start = time.perf_counter()
+        result = fuse(desk, FuseConfig(splat=None))
+        seconds = time.perf_counter() - start
+        registered = sum(result.report["alignment"]["aligned"].values())
+        errors = relative_rotation_errors([c.world_to_cam for c in result.cameras], [c.world_to_cam for c in own.cameras])
+        ious = [mask_iou(a.mask, b.mask) for a, b in zip(result.capture.views, own.capture.views)]
+        print(f"| {name} | {registered}/3 | {' / '.join(f'{e:.2f}' for e in errors)} | "
+              f"{' / '.join(f'{iou:.3f}' for iou in ious)} | {seconds:.1f} |", flush=True)
+
+
+def main() -> int:
+    from fingersplat3d.eval.machine import machine
+    from fingersplat3d.synth import SynthConfig, synthesize
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=3, help="fs3d synth uwa fingers (640x512)")
+    parser.add_argument("--real", type=Path, default=DEFAULT_REAL, help="the real dev captures (skipped if absent)")
+    parser.add_argument("--fuse", default="", help="real captures to fuse on the bright desk, comma-separated")
+    args = parser.parse_args()
+    info = machine()
+    print(f"Machine: {info['cpu']}, {info['cores']} cores.\n")
+    print("| views | background | mask IoU median (min) | outline offset px, median | outline distance px, "
+          "90th pct median | mask s |\n|---|---|---|---|---|---|")
+    rng = np.random.default_rng(0)
+    synthetic = [view for seed in range(args.seeds) for view in synthesize(seed, SynthConfig(size=(640, 512))).capture.views]
+    _mask_rows(f"synthetic uwa 640x512 ({len(synthetic)})", synthetic, [view.mask for view in synthetic], rng)
+    if args.real.is_dir():
+        from fingersplat3d.segment.masks import finger_mask
+
+        real = _real_views(args.real)
+        _mask_rows(f"real dev 1280x1024 ({len(real)})", real, [finger_mask(view.image) for view in real], rng)
+        if args.fuse:
+            _fuse_rows(args.real, [name for name in args.fuse.split(",") if name], rng)
+    else:
+        print(f"\n(real captures not found at {args.real}: skipped)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_script(main))
