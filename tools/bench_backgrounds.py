@@ -31,11 +31,10 @@ def _real_views(folder: Path) -> list:
             load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0].views]
 
 
-def _mask_rows(source: str, views, truths, rng) -> list[str]:
+def _mask_rows(source: str, views, truths, rng) -> None:
     from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
     from fingersplat3d.segment.masks import finger_mask, mask_iou, outline_offset_px
 
-    rows = []
     for kind in BACKGROUNDS:
         ious, offsets, far, seconds = [], [], [], []
         for view, truth in zip(views, truths):
@@ -51,10 +50,8 @@ def _mask_rows(source: str, views, truths, rng) -> list[str]:
             offset, distance = outline_offset_px(found, truth)
             offsets.append(offset)
             far.append(distance)
-        rows.append(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(offsets):+.1f} | "
-                    f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |")
-        print(rows[-1], flush=True)
-    return rows
+        print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(offsets):+.1f} | "
+              f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |", flush=True)
 
 
 def _fuse_rows(folder: Path, captures: list[str], rng) -> None:
@@ -63,11 +60,10 @@ def _fuse_rows(folder: Path, captures: list[str], rng) -> None:
     from fingersplat3d.io.datasets import load_any
     from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.scene import Capture, View
+    from fingersplat3d.segment.masks import mask_iou
 
     print("\n| capture (bright desk) | views registered | turn against its own photos' fuse 0-1 / 0-2 / 1-2 ° | "
           "masks IoU against the photos' | geometry s |\n|---|---|---|---|---|")
-    from fingersplat3d.segment.masks import mask_iou
-
     for name in captures:
         capture = load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0]
         own = fuse(capture, FuseConfig(splat=None))

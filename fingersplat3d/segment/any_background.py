@@ -127,11 +127,17 @@ def _largest_ridge_area(ridged: np.ndarray) -> tuple[np.ndarray, int] | None:
     return blobs == largest, int(stats[largest, cv2.CC_STAT_AREA])
 
 
-def _colour_distance(colour: np.ndarray, seed: np.ndarray, floor: float) -> np.ndarray:
+def _colour_floor(colour: np.ndarray) -> float:
+    """The spread added to each channel's standard deviation in the colour distances: 0.02 of the range (5 of 255 in
+    8-bit levels), so that a flat sample does not make every other colour infinitely far."""
+    return 5.0 if colour.dtype == np.uint8 else 0.02
+
+
+def _colour_distance(colour: np.ndarray, seed: np.ndarray) -> np.ndarray:
     """Per pixel, the distance of ``colour`` from the mean colour of the ``seed`` pixels, in their standard deviations
-    per channel (``floor`` added to each, so that a flat seed does not make every other colour infinitely far)."""
+    per channel (:func:`_colour_floor` added to each)."""
     skin = colour[seed].astype(np.float32)
-    return np.linalg.norm((colour - skin.mean(0)) / (skin.std(0) + floor), axis=-1)
+    return np.linalg.norm((colour - skin.mean(0)) / (skin.std(0) + _colour_floor(colour)), axis=-1)
 
 
 def _sure_finger(area: np.ndarray, period: np.ndarray, colour: np.ndarray) -> np.ndarray:
@@ -141,8 +147,7 @@ def _sure_finger(area: np.ndarray, period: np.ndarray, colour: np.ndarray) -> np
     core = _core(area, period)
     if not core.any():
         return core
-    floor = 5.0 if colour.dtype == np.uint8 else 0.02
-    near = area & (_colour_distance(colour, core, floor) < SURE_SKIN_DISTANCE)
+    near = area & (_colour_distance(colour, core) < SURE_SKIN_DISTANCE)
     count, pieces = cv2.connectedComponents((near | core).view(np.uint8), connectivity=8)
     held = np.unique(pieces[core])
     return np.isin(pieces, held[held > 0])
@@ -152,14 +157,13 @@ def _skin_like(colour: np.ndarray, pad: np.ndarray, background: np.ndarray, with
     """Pixels whose colour may be the finger's: within ``within`` of the pad's colour (its standard deviations), or
     nearer the pad's colour than the ``background`` sample's (median and MAD, so that skin in the sample does not
     widen it). The second keeps a finger's shaded base, darker than its pad but far from a bright desk."""
-    floor = 5.0 if colour.dtype == np.uint8 else 0.02
-    to_skin = _colour_distance(colour, pad, floor)
+    to_skin = _colour_distance(colour, pad)
     if not background.any():
         return to_skin < within
     sample = colour[background].astype(np.float32)
     centre = np.median(sample, 0)
     spread = np.array([robust_sigma(sample[:, k], centre[k]) for k in range(sample.shape[1])], np.float32)
-    to_background = np.linalg.norm((colour - centre) / (spread + floor), axis=-1)
+    to_background = np.linalg.norm((colour - centre) / (spread + _colour_floor(colour)), axis=-1)
     return (to_skin < within) | (to_skin < to_background)
 
 
