@@ -6,7 +6,8 @@ Masks: each view's finger composited onto each background of
 :data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS` (``fs3d synth`` uwa fingers at 640x512 against their true
 masks; the real dev views at 1280x1024 against their dark-background masks), then segmented from the composite alone.
 Per background and source: mask IoU median (min) and the outline's offset (median signed, positive = too wide; 90th
-percentile of its distance), px at the photo's size. ``--fuse``: those real captures fused (geometry only) from the
+percentile of its distance), and how far it lies outside on average to a fraction of a pixel (the area between
+the masks over the true outline's length), px at the photo's size. ``--fuse``: those real captures fused (geometry only) from the
 bright-desk composites, each pair's turn against the same capture fused from its own photos. Markdown tables.
 """
 from __future__ import annotations
@@ -33,10 +34,10 @@ def _real_views(folder: Path) -> list:
 
 def _mask_rows(source: str, views, truths, rng) -> None:
     from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
-    from fingersplat3d.segment.masks import finger_mask, mask_iou, outline_offset_px
+    from fingersplat3d.segment.masks import finger_mask, mask_iou, outline_offset_px, outward_px
 
     for kind in BACKGROUNDS:
-        ious, offsets, far, seconds = [], [], [], []
+        ious, outward, offsets, far, seconds = [], [], [], [], []
         for view, truth in zip(views, truths):
             photo = on_background(view.image, truth, background(kind, view.image.shape, rng))
             start = time.perf_counter()
@@ -47,10 +48,12 @@ def _mask_rows(source: str, views, truths, rng) -> None:
                 found = np.zeros_like(truth)
             seconds.append(time.perf_counter() - start)
             ious.append(mask_iou(found, truth))
+            outward.append(outward_px(found, truth))
             offset, distance = outline_offset_px(found, truth)
             offsets.append(offset)
             far.append(distance)
-        print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(offsets):+.1f} | "
+        print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(outward):+.2f} | "
+              f"{np.nanmedian(offsets):+.1f} | "
               f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |", flush=True)
 
 
@@ -90,8 +93,8 @@ def main() -> int:
     args = parser.parse_args()
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores.\n")
-    print("| views | background | mask IoU median (min) | outline offset px, median | outline distance px, "
-          "90th pct median | mask s |\n|---|---|---|---|---|---|")
+    print("| views | background | mask IoU median (min) | outward px (area over outline), median | outline offset px, "
+          "median | outline distance px, 90th pct median | mask s |\n|---|---|---|---|---|---|---|")
     rng = np.random.default_rng(0)
     synthetic = [view for seed in range(args.seeds) for view in synthesize(seed, SynthConfig(size=(640, 512))).capture.views]
     _mask_rows(f"synthetic uwa 640x512 ({len(synthetic)})", synthetic, [view.mask for view in synthetic], rng)

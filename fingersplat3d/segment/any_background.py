@@ -17,7 +17,8 @@ one period and a slowly turning orientation. So:
    piece; inside it, what is far from the pad's colour starts as probable background), so that background stuff
    that went along with the finger falls away;
 5. the finger carried out across the border ring where it reaches it (a finger the frame cuts stays cut by the
-   frame), holes filled, back to full size with a smooth edge.
+   frame), holes filled, back to full size with a smooth edge;
+6. the outline moved onto the photo's edge at full size, to a fraction of a pixel (:func:`_on_the_edge`).
 
 It fails with an :class:`~fingersplat3d.errors.InputError` when no ridge area stands out (a photo with no finger,
 or one too blurred to show ridges). Pure numpy/OpenCV.
@@ -30,7 +31,8 @@ import numpy as np
 from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
-from .regions import fill_holes
+from .masks import CREST_POWER
+from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 
 __all__ = ["finger_mask_any_background", "ridge_score", "WORK_SIDE", "PERIODS_PX"]
 
@@ -60,6 +62,12 @@ start as probable background."""
 RING_SHARE = 0.02
 """Width of the frame's border ring GrabCut takes as background, as a share of the long side."""
 GRABCUT_ITERATIONS = 5
+EDGE_BLUR_PX = 2.0
+"""The photo is blurred this much before the outline is put on its edge (:func:`_on_the_edge`): ridges fade, and a
+symmetric blur leaves the midpoint between the two sides on the edge."""
+EDGE_CONTRAST = 0.05
+"""The least difference (share of the range) between the local finger and background colours for the outline to be
+moved onto the edge; elsewhere GrabCut's outline stays."""
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
@@ -195,6 +203,47 @@ def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, perio
     return np.isin(components, held[held > 0])
 
 
+def _on_the_edge(colour: np.ndarray, mask: np.ndarray, reach: float) -> np.ndarray:
+    """``mask`` with its outline moved onto the photo's edge, to a fraction of a pixel.
+
+    GrabCut works on a copy of at most :data:`WORK_SIDE` px and keeps an edge's blended pixels: its outline lies
+    about one photo pixel outside the finger at 640 px, more once scaled up, and half a pixel of outline turns a
+    registered camera by up to half a degree. Within ``reach`` px of that outline, each pixel's colour (blurred by
+    :data:`EDGE_BLUR_PX`) is placed between the finger's and the background's local colours (their means over the
+    band's inner and outer halves, :func:`~fingersplat3d.segment.regions.local_sums`) and is finger past that
+    place's level at the crest of its gradient (:func:`~fingersplat3d.segment.regions.crest_level`, as the
+    dark-background masks take theirs), wherever the two colours differ by :data:`EDGE_CONTRAST`. ``colour``
+    ``[H, W, 3]`` float32 in [0, 1]."""
+    mask8 = mask.view(np.uint8)
+    inside = cv2.distanceTransform(mask8, cv2.DIST_L2, 3)
+    outside = cv2.distanceTransform(1 - mask8, cv2.DIST_L2, 3)
+    band = (inside <= reach) & (outside <= reach)
+    smooth = cv2.GaussianBlur(colour, (0, 0), EDGE_BLUR_PX, borderType=cv2.BORDER_REPLICATE)
+    height, width = mask.shape
+    means = []
+    for side in (band & mask, band & ~mask):
+        weight = side.astype(np.float32)
+        mass, total = local_sums(weight, weight[..., None] * smooth)
+        seen = mass > 1e-3 * max(float(mass.max()), 1e-30)
+        mean = np.where(seen[..., None], total / np.maximum(mass, 1e-30)[..., None], np.nan).astype(np.float32)
+        means.append(cv2.resize(mean, (width, height), interpolation=cv2.INTER_LINEAR))
+    skin, background = means
+    step = skin - background
+    size = np.einsum("ijk,ijk->ij", step, step)
+    placed = np.einsum("ijk,ijk->ij", smooth - background, step) / np.maximum(size, 1e-12)
+    moved = band & (size > EDGE_CONTRAST ** 2)  # NaN where a side was not seen: compares False
+    # the skin darkens (or pales) toward its rim, so the midpoint of the two sides' means would move the outline by
+    # that trend (~0.5 px on the real views); the level at the crest of the place's gradient is the midpoint at the edge
+    placed = np.nan_to_num(placed).astype(np.float32)
+    level = crest_level(placed, gradient_magnitude(placed), moved, np.full_like(placed, 0.5), CREST_POWER)
+    snapped = mask.copy()
+    if level is not None:
+        snapped[moved] = placed[moved] > level[moved]
+    count, pieces = cv2.connectedComponents(snapped.view(np.uint8), connectivity=8)
+    held = np.unique(pieces[snapped & (inside > reach)])
+    return fill_holes(np.isin(pieces, held[held > 0])) if held.any() else mask
+
+
 def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` float in [0, 1]) on any
     background (see the module docstring)."""
@@ -204,8 +253,8 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     small = cv2.resize(image, size, interpolation=cv2.INTER_AREA) if factor < 1.0 else image
     small = np.clip(np.asarray(small, np.float32), 0.0, 1.0)
     top = float(np.percentile(small, 99.5))
-    if 0.0 < top < 0.5:  # a dim exposure (16-bit data using the bottom of its range): stretched before 8-bit GrabCut
-        small = np.clip(small / top, 0.0, 1.0)
+    stretch = 1.0 / top if 0.0 < top < 0.5 else 1.0  # a dim exposure (16-bit data using the bottom of its range)
+    small = np.clip(small * stretch, 0.0, 1.0)  # ... stretched before 8-bit GrabCut and the edge's contrast test
     gray = _gray(small)
     ring_width = max(2, int(RING_SHARE * max(size)))
     colour = small if small.ndim == 3 else np.repeat(small[..., None], 3, axis=2)
@@ -240,4 +289,6 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     finger = fill_holes(_to_border(finger, ring_width))
     if factor < 1.0:  # back to full size with a smooth edge
         finger = cv2.resize(finger.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR) > 0.5
-    return finger
+    full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
+    full = full if full.ndim == 3 else np.repeat(full[..., None], 3, axis=2)
+    return _on_the_edge(full, finger, 2.0 / factor + 1.0)

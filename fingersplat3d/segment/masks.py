@@ -45,9 +45,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..robust import robust_sigma
-from .regions import fill_holes
+from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 
-__all__ = ["finger_mask", "mask_iou", "outline_offset_px"]
+__all__ = ["finger_mask", "mask_iou", "outward_px", "outline_offset_px"]
 
 SMOOTH_SIGMA_PX = 1.0  # Gaussian pre-smoothing (pixels): averages noise, keeps the edge in place
 MIN_CONTRAST_SIGMAS = 6.0  # skin must stand this many background-noise sigmas above the background
@@ -125,6 +125,18 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
         raise ValueError(f"masks have different shapes {a.shape} and {b.shape}")
     union = np.count_nonzero(a | b)
     return 1.0 if union == 0 else np.count_nonzero(a & b) / union
+
+
+def outward_px(found: np.ndarray, truth: np.ndarray) -> float:
+    """How far ``found``'s outline lies outside ``truth``'s on average, px, to a fraction of a pixel: the area between
+    them (signed: positive for a mask too wide) over the true outline's length. NaN when ``truth`` is empty."""
+    found, truth = np.asarray(found, bool), np.asarray(truth, bool)
+    if found.shape != truth.shape:
+        raise ValueError(f"masks have different shapes {found.shape} and {truth.shape}")
+    contours, _ = cv2.findContours(truth.view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return float("nan")
+    return float(np.count_nonzero(found) - np.count_nonzero(truth)) / max(cv2.arcLength(max(contours, key=cv2.contourArea), True), 1.0)
 
 
 def outline_offset_px(found: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
@@ -223,24 +235,16 @@ def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.
     (the crest outweighs the skin's ramp toward a shaded rim and the ridges, faded by :data:`CREST_BLUR_PX`), averaged
     locally like the midpoint; the band is centred again on each new outline, :data:`CREST_ROUNDS` times."""
     height, width = smooth.shape
-    blurred = cv2.GaussianBlur(smooth, (0, 0), CREST_BLUR_PX, borderType=cv2.BORDER_REPLICATE)
-    gx = cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    gy = cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    magnitude = cv2.magnitude(gx, gy)
+    magnitude = gradient_magnitude(cv2.GaussianBlur(smooth, (0, 0), CREST_BLUR_PX, borderType=cv2.BORDER_REPLICATE))
     half_width = max(4.0, CREST_BAND * max(height, width))
     for _ in range(CREST_ROUNDS):
         mask8 = (smooth > threshold).view(np.uint8)
         inside = cv2.distanceTransform(mask8, cv2.DIST_L2, 3)
         outside = cv2.distanceTransform(1 - mask8, cv2.DIST_L2, 3)
-        band = (inside <= half_width) & (outside <= half_width)
-        peak = float(magnitude[band].max()) if band.any() else 0.0
-        if not peak > 0.0:
+        level = crest_level(smooth, magnitude, (inside <= half_width) & (outside <= half_width), threshold, CREST_POWER)
+        if level is None:
             break
-        weight = np.where(band, magnitude / peak, 0.0).astype(np.float32) ** CREST_POWER
-        mass, total = _local_sums(weight, weight * smooth)
-        before = cv2.resize(threshold, mass.shape[::-1], interpolation=cv2.INTER_AREA)
-        level = np.where(mass > 1e-3 * float(mass.max()), total / np.maximum(mass, 1e-30), before).astype(np.float32)
-        threshold = np.maximum(floor, cv2.resize(level, (width, height), interpolation=cv2.INTER_LINEAR))
+        threshold = np.maximum(floor, level)
     return threshold
 
 
@@ -264,24 +268,11 @@ def _edge_midpoint(smooth: np.ndarray, region: np.ndarray, bg_level: float, floo
     if np.count_nonzero(band) < 16:
         return None
     height, width = smooth.shape
-    weight, total = _local_sums(band, band * smooth)
+    weight, total = local_sums(band, band * smooth)
     edge_level = float(total.sum() / max(weight.sum(), 1e-12))  # where no band is near
     local = np.where(weight > 1e-4, total / np.maximum(weight, 1e-4), edge_level).astype(np.float32)
     midpoint = np.maximum(floor, 0.5 * (bg_level + local))
     return cv2.resize(midpoint, (width, height), interpolation=cv2.INTER_LINEAR)
-
-
-def _local_sums(weight: np.ndarray, weighted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gaussian local sums (sigma ~1.5 % of the long side) of ``weight`` and ``weighted`` (weight times a value), on a
-    grid a few times coarser than the image, which is all such a smooth map needs: their ratio is the value's local
-    weighted mean. Both float32, the coarse grid's shape."""
-    height, width = weight.shape
-    sigma = max(2.0, 0.015 * max(height, width))
-    factor = max(1, int(sigma // 2))
-    coarse = (max(1, -(-width // factor)), max(1, -(-height // factor)))
-    mass = cv2.GaussianBlur(cv2.resize(weight, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
-    total = cv2.GaussianBlur(cv2.resize(weighted, coarse, interpolation=cv2.INTER_AREA), (0, 0), sigma / factor)
-    return mass, total
 
 
 def _otsu(values: np.ndarray, low: float, high: float, bins: int = 256) -> float:
