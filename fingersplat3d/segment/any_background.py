@@ -31,7 +31,6 @@ import numpy as np
 from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
-from .masks import CREST_POWER
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 
 __all__ = ["finger_mask_any_background", "ridge_score", "WORK_SIDE", "PERIODS_PX"]
@@ -235,7 +234,7 @@ def _on_the_edge(colour: np.ndarray, mask: np.ndarray, reach: float) -> np.ndarr
     # the skin darkens (or pales) toward its rim, so the midpoint of the two sides' means would move the outline by
     # that trend (~0.5 px on the real views); the level at the crest of the place's gradient is the midpoint at the edge
     placed = np.nan_to_num(placed).astype(np.float32)
-    level = crest_level(placed, gradient_magnitude(placed), moved, np.full_like(placed, 0.5), CREST_POWER)
+    level = crest_level(placed, gradient_magnitude(placed), moved, np.full_like(placed, 0.5))
     snapped = mask.copy()
     if level is not None:
         snapped[moved] = placed[moved] > level[moved]

@@ -63,7 +63,6 @@ EDGE_GROWTH = 0.01  # a read is kept when its mask is larger than the last one's
 EDGE_SOLIDITY_LOSS = 0.01  # ... and its largest piece's solidity (area / convex hull) is not lower by more than this
 CREST_BAND = 0.012  # half-width of the band about the outline where the gradient's crest is looked for (share of the long side)
 CREST_BLUR_PX = 2.0  # the brightness is blurred this much more before its gradient: ridges fade, the edge's crest stays put
-CREST_POWER = 4  # the band's pixels weigh by gradient magnitude to this power: the crest dominates, a ramp or ridge does not
 CREST_ROUNDS = 3  # the band is centred again on the outline the last level gave
 
 
@@ -231,9 +230,10 @@ def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.
     so the level read is low and the outline grows by about the blur (1.3 px at sigma 4, 7 px at sigma 8 on the
     synthetic close-ups of ``tools/bench_defocus.py``). Wherever a step is blurred symmetrically, its gradient peaks
     at the true edge and the brightness there is the midpoint, whatever the blur. So the level is the brightness
-    averaged over a band about the outline weighted by the gradient magnitude to the power :data:`CREST_POWER`
-    (the crest outweighs the skin's ramp toward a shaded rim and the ridges, faded by :data:`CREST_BLUR_PX`), averaged
-    locally like the midpoint; the band is centred again on each new outline, :data:`CREST_ROUNDS` times."""
+    averaged over a band about the outline weighted by the gradient magnitude to a power
+    (:func:`~fingersplat3d.segment.regions.crest_level`: the crest outweighs the skin's ramp toward a shaded rim and
+    the ridges, faded by :data:`CREST_BLUR_PX`), averaged locally like the midpoint; the band is centred again on each
+    new outline, :data:`CREST_ROUNDS` times."""
     height, width = smooth.shape
     magnitude = gradient_magnitude(cv2.GaussianBlur(smooth, (0, 0), CREST_BLUR_PX, borderType=cv2.BORDER_REPLICATE))
     half_width = max(4.0, CREST_BAND * max(height, width))
@@ -241,7 +241,7 @@ def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.
         mask8 = (smooth > threshold).view(np.uint8)
         inside = cv2.distanceTransform(mask8, cv2.DIST_L2, 3)
         outside = cv2.distanceTransform(1 - mask8, cv2.DIST_L2, 3)
-        level = crest_level(smooth, magnitude, (inside <= half_width) & (outside <= half_width), threshold, CREST_POWER)
+        level = crest_level(smooth, magnitude, (inside <= half_width) & (outside <= half_width), threshold)
         if level is None:
             break
         threshold = np.maximum(floor, level)

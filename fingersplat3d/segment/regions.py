@@ -4,7 +4,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["fill_holes", "local_sums", "gradient_magnitude", "crest_level"]
+__all__ = ["fill_holes", "local_sums", "gradient_magnitude", "crest_level", "CREST_POWER"]
+
+CREST_POWER = 4
+"""A crest level's pixels weigh by gradient magnitude to this power: the crest dominates, a ramp or ridge does not."""
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:
@@ -38,7 +41,7 @@ def gradient_magnitude(image: np.ndarray) -> np.ndarray:
 
 
 def crest_level(values: np.ndarray, magnitude: np.ndarray, band: np.ndarray, fallback: np.ndarray,
-                power: float) -> np.ndarray | None:
+                power: float = CREST_POWER) -> np.ndarray | None:
     """The local level of ``values`` at the crest of an edge: their local mean over ``band`` weighted by the gradient
     ``magnitude`` (over its peak in the band) to ``power``, so that the crest outweighs a ramp or the ridges;
     ``fallback`` where no crest is near. Wherever a step is blurred symmetrically its gradient peaks on the true edge,
