@@ -7,8 +7,9 @@ Masks: each view's finger composited onto each background of
 masks; the real dev views at 1280x1024 against their dark-background masks), then segmented from the composite alone.
 Per background and source: mask IoU median (min) and the outline's offset (median signed, positive = too wide; 90th
 percentile of its distance), and how far it lies outside on average to a fraction of a pixel (the area between
-the masks over the true outline's length), px at the photo's size. ``--fuse``: those real captures fused (geometry only) from the
-bright-desk composites, each pair's turn against the same capture fused from its own photos. Markdown tables.
+the masks over the true outline's length), px at the photo's size. ``--fuse``: those real captures fused (geometry
+only) from the bright-desk composites, each pair's turn against the same capture fused from its own photos. Markdown
+tables.
 """
 from __future__ import annotations
 
