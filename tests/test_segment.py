@@ -139,7 +139,8 @@ def test_mask_iou():
 
 
 def test_a_finger_on_a_bright_or_cluttered_background():
-    """Phone photos: no dark background. Measured IoU 0.989-0.996 on a bright desk, 0.95-0.99 on out-of-focus clutter."""
+    """Phone photos: no dark background. Measured IoU 0.989-0.996 on a bright desk, 0.993-0.996 on out-of-focus clutter
+    (0.986-0.994 before the skin's colour had its covariance)."""
     views = synthetic_views("uwa", 1)
     rng = np.random.default_rng(0)
     for view in views:
@@ -151,7 +152,7 @@ def test_a_finger_on_a_bright_or_cluttered_background():
         dim = finger_mask(bright * 0.02)  # a dim exposure (16-bit, bottom of the range)
         assert mask_iou(dim, view.mask) > 0.95 and abs(outward_px(dim, view.mask)) <= 0.5
         cluttered = on_background(view.image, view.mask, clutter(view.image.shape, rng))
-        assert mask_iou(finger_mask(cluttered), view.mask) > 0.7
+        assert mask_iou(finger_mask(cluttered), view.mask) > 0.95
     plain = (0.8 + 0.02 * rng.normal(size=(256, 320, 3))).clip(0, 1).astype(np.float32)
     assert "no finger" in raises_naming("desk.jpg", finger_mask, plain, name="desk.jpg")
 
@@ -171,6 +172,44 @@ def test_a_real_finger_on_a_bright_desk_keeps_its_outline(real_dev):
     # GrabCut's outline, at 640 px and scaled up, kept the edge's blended pixels (0.99 px outside, which turned the
     # registered cameras by up to 0.97 degrees); moved onto the edge's crest: measured 0.11 px
     assert abs(outward_px(found, truth)) <= 0.3
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_real_finger_on_clutter_keeps_to_its_outline(real_dev, seed):
+    """A grey finger on coloured clutter: in standard deviations per channel, the ridges' spread made saturated
+    things as near the skin's colour as its own shades, and GrabCut's finger model was learned from everything inside
+    the frame's border. Measured with that code on these photos: IoU 0.62-0.86, up to 91 px outside on average;
+    now 0.979-0.999, 0.14-3.19 px."""
+    from fingersplat3d.io.datasets import load_any
+
+    view = load_any([real_dev / "1_1_2_1_1.jpg"])[0].views[0]
+    truth = finger_mask(view.image)
+    for blur in (6.0, 1.0):  # out of focus, in focus
+        found = finger_mask(on_background(view.image, truth, clutter(view.image.shape, np.random.default_rng(seed), blur)))
+        assert mask_iou(found, truth) > 0.95
+        assert abs(outward_px(found, truth)) <= 4.0
+
+
+def test_colour_distance_follows_the_skins_own_spread():
+    """Skin varies along its own colour (ridges, shading), little across it: a saturated colour as bright as the skin
+    is far from it, a shade of it near; strict, a lighter grey (a bright desk) is bounded per channel too."""
+    from fingersplat3d.segment.any_background import _colour_distance
+
+    rng = np.random.default_rng(0)
+    grey = np.clip(0.45 + 0.1 * rng.normal(size=(40, 40)), 0, 1)
+    image = np.repeat(grey[..., None], 3, axis=2).astype(np.float32)  # a grey finger's ridges: every channel alike
+    image[0, 0] = (0.6, 0.3, 0.45)  # purple, as bright as the skin
+    image[0, 1] = (0.2, 0.2, 0.2)  # a shade of the skin
+    image[0, 2] = (0.8, 0.8, 0.8)  # a bright desk
+    seed = np.ones((40, 40), bool)
+    seed[0, :3] = False
+    lenient, strict = _colour_distance(image, seed), _colour_distance(image, seed, strict=True)
+    assert lenient[0, 0] > 5.0 > 3.0 > lenient[0, 1]  # purple beyond the piece's 5, the shade within the sure 3
+    assert strict[0, 2] > lenient[0, 2] and strict[0, 2] > 3.0  # not sure finger
+    assert np.all(strict >= lenient - 1e-5) and np.all(np.isfinite(strict))
+    one = np.zeros((40, 40), bool)
+    one[5, 5] = True  # a single seed pixel: no covariance, the floor alone
+    assert np.all(np.isfinite(_colour_distance(image, one))) and _colour_distance(image, one)[5, 5] == 0.0
 
 
 def test_outline_offset_is_signed_and_in_pixels():

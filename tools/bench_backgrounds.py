@@ -1,15 +1,16 @@
-"""A finger on other backgrounds (phone photos): masks, and the registration of real captures on a bright desk.
+"""A finger on other backgrounds (phone photos): masks, and the registration of real captures composited on them.
 
     python3 tools/bench_backgrounds.py [--seeds 3] [--real ../shared/data/uwa-real-dev] [--fuse 1_1_2_1,2_2_7_1]
 
 Masks: each view's finger composited onto each background of
-:data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS` (``fs3d synth`` uwa fingers at 640x512 against their true
-masks; the real dev views at 1280x1024 against their dark-background masks), then segmented from the composite alone.
+:data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS` (``fs3d synth`` uwa fingers at 640x512, grey and colour skin,
+against their true masks; the real dev views at 1280x1024, each finger apart, against their dark-background masks),
+then segmented from the composite alone; each view's background drawn from its own seed.
 Per background and source: mask IoU median (min) and the outline's offset (median signed, positive = too wide; 90th
 percentile of its distance), and how far it lies outside on average to a fraction of a pixel (the area between
 the masks over the true outline's length), px at the photo's size. ``--fuse``: those real captures fused (geometry
-only) from the bright-desk composites, each pair's turn against the same capture fused from its own photos. Markdown
-tables.
+only) from their composites on each background, each pair's turn against the same capture fused from its own photos.
+Markdown tables.
 """
 from __future__ import annotations
 
@@ -25,21 +26,25 @@ from fingersplat3d.errors import run_script
 DEFAULT_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
 
 
-def _real_views(folder: Path) -> list:
+def _real_views(folder: Path, finger: str) -> list:
+    """Frames 0-2 of every capture of one finger (``1_1``, ``2_2``) in ``folder``."""
     from fingersplat3d.io.datasets import load_any
 
-    captures = sorted({path.name.rsplit("_", 1)[0] for path in folder.glob("*_*_*_*_[0-9].jpg")})
+    captures = sorted({path.name.rsplit("_", 1)[0] for path in folder.glob(f"{finger}_*_*_[0-9].jpg")})
     return [view for name in captures for view in
             load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0].views]
 
 
-def _mask_rows(source: str, views, truths, rng) -> None:
+def _mask_rows(source: str, views, truths, stream: int) -> None:
+    """One row per background; each view's background drawn from its own seed (``stream``, the view, the
+    background), so a row's photos do not depend on what ran before it."""
     from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
     from fingersplat3d.segment.masks import finger_mask, mask_iou, outline_offset_px, outward_px
 
-    for kind in BACKGROUNDS:
+    for kind_index, kind in enumerate(BACKGROUNDS):
         ious, outward, offsets, far, seconds = [], [], [], [], []
-        for view, truth in zip(views, truths):
+        for index, (view, truth) in enumerate(zip(views, truths)):
+            rng = np.random.default_rng([stream, index, kind_index])
             photo = on_background(view.image, truth, background(kind, view.image.shape, rng))
             start = time.perf_counter()
             try:
@@ -53,34 +58,44 @@ def _mask_rows(source: str, views, truths, rng) -> None:
             offset, distance = outline_offset_px(found, truth)
             offsets.append(offset)
             far.append(distance)
-        print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {np.nanmedian(outward):+.2f} | "
+        print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | "
+              f"{sum(iou < 0.9 for iou in ious)} of {len(ious)} | {np.nanmedian(outward):+.2f} | "
               f"{np.nanmedian(offsets):+.1f} | "
               f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |", flush=True)
 
 
-def _fuse_rows(folder: Path, captures: list[str], rng) -> None:
+def _fuse_rows(folder: Path, captures: list[str]) -> None:
+    from fingersplat3d.errors import InputError
     from fingersplat3d.eval.poses import relative_rotation_errors
-    from fingersplat3d.experiments.backgrounds import bright_desk, on_background
+    from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
     from fingersplat3d.io.datasets import load_any
     from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.scene import Capture, View
     from fingersplat3d.segment.masks import mask_iou
 
-    print("\n| capture (bright desk) | views registered | turn against its own photos' fuse 0-1 / 0-2 / 1-2 ° | "
-          "masks IoU against the photos' | geometry s |\n|---|---|---|---|---|")
-    for name in captures:
+    print("\n| capture | background | views registered | turn against its own photos' fuse 0-1 / 0-2 / 1-2 ° | "
+          "masks IoU against the photos' | geometry s |\n|---|---|---|---|---|---|")
+    for capture_index, name in enumerate(captures):
         capture = load_any([folder / f"{name}_{frame}.jpg" for frame in range(3)])[0]
         own = fuse(capture, FuseConfig(splat=None))
-        desk = Capture(tuple(View(view.name, on_background(view.image, mask.mask, bright_desk(view.image.shape, rng)))
-                             for view, mask in zip(capture.views, own.capture.views)), capture.metadata)
-        start = time.perf_counter()
-        result = fuse(desk, FuseConfig(splat=None))
-        seconds = time.perf_counter() - start
-        registered = sum(result.report["alignment"]["aligned"].values())
-        errors = relative_rotation_errors([c.world_to_cam for c in result.cameras], [c.world_to_cam for c in own.cameras])
-        ious = [mask_iou(a.mask, b.mask) for a, b in zip(result.capture.views, own.capture.views)]
-        print(f"| {name} | {registered}/3 | {' / '.join(f'{e:.2f}' for e in errors)} | "
-              f"{' / '.join(f'{iou:.3f}' for iou in ious)} | {seconds:.1f} |", flush=True)
+        for kind_index, kind in enumerate(BACKGROUNDS):
+            rng = np.random.default_rng([3, capture_index, kind_index])
+            composite = Capture(tuple(View(view.name, on_background(view.image, mask.mask,
+                                                                    background(kind, view.image.shape, rng)))
+                                      for view, mask in zip(capture.views, own.capture.views)), capture.metadata)
+            start = time.perf_counter()
+            try:
+                result = fuse(composite, FuseConfig(splat=None))
+            except InputError as error:  # no finger found in a view: the row says so
+                print(f"| {name} | {kind} | – | {error} | | |", flush=True)
+                continue
+            seconds = time.perf_counter() - start
+            registered = sum(result.report["alignment"]["aligned"].values())
+            errors = relative_rotation_errors([c.world_to_cam for c in result.cameras],
+                                              [c.world_to_cam for c in own.cameras])
+            ious = [mask_iou(a.mask, b.mask) for a, b in zip(result.capture.views, own.capture.views)]
+            print(f"| {name} | {kind} | {registered}/3 | {' / '.join(f'{e:.2f}' for e in errors)} | "
+                  f"{' / '.join(f'{iou:.3f}' for iou in ious)} | {seconds:.1f} |", flush=True)
 
 
 def main() -> int:
@@ -88,24 +103,28 @@ def main() -> int:
     from fingersplat3d.synth import SynthConfig, synthesize
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=3, help="fs3d synth uwa fingers (640x512)")
+    parser.add_argument("--seeds", type=int, default=3, help="fs3d synth uwa fingers (640x512), grey and colour skin")
     parser.add_argument("--real", type=Path, default=DEFAULT_REAL, help="the real dev captures (skipped if absent)")
-    parser.add_argument("--fuse", default="", help="real captures to fuse on the bright desk, comma-separated")
+    parser.add_argument("--fuse", default="", help="real captures to fuse on each background, comma-separated")
     args = parser.parse_args()
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores.\n")
-    print("| views | background | mask IoU median (min) | outward px (area over outline), median | outline offset px, "
-          "median | outline distance px, 90th pct median | mask s |\n|---|---|---|---|---|---|---|")
-    rng = np.random.default_rng(0)
-    synthetic = [view for seed in range(args.seeds) for view in synthesize(seed, SynthConfig(size=(640, 512))).capture.views]
-    _mask_rows(f"synthetic uwa 640x512 ({len(synthetic)})", synthetic, [view.mask for view in synthetic], rng)
+    print("| views | background | mask IoU median (min) | IoU under 0.9 | outward px (area over outline), median | "
+          "outline offset px, median | outline distance px, 90th pct median | mask s |\n|---|---|---|---|---|---|---|---|")
+    for stream, gray in enumerate((True, False)):
+        synthetic = [view for seed in range(args.seeds)
+                     for view in synthesize(seed, SynthConfig(size=(640, 512), gray=gray)).capture.views]
+        _mask_rows(f"synthetic uwa 640x512 ({len(synthetic)}), {'grey' if gray else 'colour'} skin", synthetic,
+                   [view.mask for view in synthetic], stream)
     if args.real.is_dir():
         from fingersplat3d.segment.masks import finger_mask
 
-        real = _real_views(args.real)
-        _mask_rows(f"real dev 1280x1024 ({len(real)})", real, [finger_mask(view.image) for view in real], rng)
+        for stream, (finger, label) in enumerate((("1_1", "finger 1"), ("2_2", "finger 2, held out")), start=2):
+            real = _real_views(args.real, finger)
+            _mask_rows(f"real dev 1280x1024 ({len(real)}), {label}", real, [finger_mask(view.image) for view in real],
+                       stream)
         if args.fuse:
-            _fuse_rows(args.real, [name for name in args.fuse.split(",") if name], rng)
+            _fuse_rows(args.real, [name for name in args.fuse.split(",") if name])
     else:
         print(f"\n(real captures not found at {args.real}: skipped)")
     return 0
