@@ -9,13 +9,14 @@ one period and a slowly turning orientation. So:
 2. OpenCV's GrabCut (colour mixture models and a graph cut) separates what stands apart from the frame's border
    ring, taken as background: a finger enters the frame at one side, so the ring is mostly background (its pixels
    nearer the skin's colour than the ring's own only probably); the largest area of ridges, shrunk by the reach of
-   its smoothing (:func:`_sure_finger`), is sure finger; what is far from its colour (:func:`_colour_distance`, the
-   skin's covariance) starts as probable background, so that GrabCut learns the finger's colours from skin and not
-   from everything inside the ring;
+   its smoothing (:func:`_sure_finger`), is sure finger;
 3. of the pieces that stand apart, the finger is the one with ridges: per pixel, a ridge score (:func:`ridge_score`:
    a periodic texture, strong against the image's median; the best over the periods :data:`PERIODS_PX`) counted
-   inside each piece away from its outline;
-4. a second GrabCut told what the finger is (that piece's ridged area) and what it is not (everything outside the
+   inside each piece away from its outline (:func:`_ridged_piece`); GrabCut is run again from the ring with that
+   piece's own ridge area as sure finger and what is far from its colour (:func:`_colour_distance`, the skin's
+   covariance) or brighter than its brightest starting as probable background, so that GrabCut learns the finger's
+   colours from skin and not from everything inside the ring;
+4. a last GrabCut told what the finger is (that piece's ridged area) and what it is not (everything outside the
    piece; inside it, what is far from the pad's colour starts as probable background), so that background stuff
    that went along with the finger falls away;
 5. the finger carried out across the border ring where it reaches it (a finger the frame cuts stays cut by the
