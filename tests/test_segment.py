@@ -185,7 +185,8 @@ def test_a_real_finger_on_clutter_keeps_to_its_outline(real_dev, seed):
     view = load_any([real_dev / "1_1_2_1_1.jpg"])[0].views[0]
     truth = finger_mask(view.image)
     for blur in (6.0, 1.0):  # out of focus, in focus
-        found = finger_mask(on_background(view.image, truth, clutter(view.image.shape, np.random.default_rng(seed), blur)))
+        scene = clutter(view.image.shape, np.random.default_rng(seed), blur)
+        found = finger_mask(on_background(view.image, truth, scene))
         assert mask_iou(found, truth) > 0.95
         assert abs(outward_px(found, truth)) <= 4.0
 

@@ -110,7 +110,8 @@ def main() -> int:
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores.\n")
     print("| views | background | mask IoU median (min) | IoU under 0.9 | outward px (area over outline), median | "
-          "outline offset px, median | outline distance px, 90th pct median | mask s |\n|---|---|---|---|---|---|---|---|")
+          "outline offset px, median | outline distance px, 90th pct median | mask s |\n"
+          "|---|---|---|---|---|---|---|---|")
     for stream, gray in enumerate((True, False)):
         synthetic = [view for seed in range(args.seeds)
                      for view in synthesize(seed, SynthConfig(size=(640, 512), gray=gray)).capture.views]

@@ -60,8 +60,8 @@ SEED_RADIUS = 10
 SKIN_DISTANCE = 1.5
 """Border-ring pixels this close to the pad's colour (:func:`_colour_distance`) may be finger."""
 PIECE_SKIN_DISTANCE = 5.0
-"""Pixels farther than this from the pad's colour (:func:`_colour_distance`) start as probable background: in the first
-cut everywhere inside the border ring, in the second inside the first cut's piece."""
+"""Pixels farther than this from the pad's colour (:func:`_colour_distance`) start as probable background: in the second
+cut everywhere inside the border ring, in the last inside the finger's piece."""
 RING_SHARE = 0.02
 """Width of the frame's border ring GrabCut takes as background, as a share of the long side."""
 GRABCUT_ITERATIONS = 5
