@@ -210,13 +210,18 @@ def _piece_pad(piece: np.ndarray, evidence: np.ndarray, period: np.ndarray, colo
     return ridged if ridged.any() else None
 
 
-def _ridged_piece(colour8: np.ndarray, labels: np.ndarray, evidence: np.ndarray, least: float) -> np.ndarray | None:
-    """GrabCut from ``labels`` (changed in place); of the pieces it keeps, the one with the most pixels of ridges away
-    from its outline, at least ``least`` of them; None where none has that many."""
+def _grab_cut(colour8: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """OpenCV's GrabCut from ``labels`` (changed in place); what it keeps as finger, sure or probable."""
     cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
     background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(colour8, labels, None, background_model, foreground_model, GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
-    candidates = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+    return (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+
+
+def _ridged_piece(colour8: np.ndarray, labels: np.ndarray, evidence: np.ndarray, least: float) -> np.ndarray | None:
+    """GrabCut from ``labels`` (changed in place); of the pieces it keeps, the one with the most pixels of ridges away
+    from its outline, at least ``least`` of them; None where none has that many."""
+    candidates = _grab_cut(colour8, labels)
     count, components, stats, _ = cv2.connectedComponentsWithStats(candidates.view(np.uint8), connectivity=8)
     best, best_count = 0, least
     for label in range(1, count):
@@ -241,10 +246,7 @@ def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, perio
     labels[~piece] = cv2.GC_BGD
     labels[_ring(piece.shape, ring_width) & ~skin] = cv2.GC_BGD  # where the finger enters the frame it stays probable
     labels[ridged] = cv2.GC_FGD
-    cv2.setRNGSeed(0)
-    background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    cv2.grabCut(colour8, labels, None, background_model, foreground_model, GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
-    finger = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+    finger = _grab_cut(colour8, labels)
     count, components = cv2.connectedComponents(finger.view(np.uint8), connectivity=8)
     held = np.unique(components[ridged & finger])
     return np.isin(components, held[held > 0])
