@@ -44,6 +44,7 @@ from ..pointmaps.base import Pointmap
 from ..scene import View
 from ..segment.silhouette import TIP_BASES, capture_axes, orient_frames, silhouette_frame
 from .correspond.chart import CylinderChart
+from .correspond.chart_growth import grow_first_guess
 from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, chart_shift_candidates,
                                      estimate_chart_shift)
 from .correspond.contours import contour_correspondences
@@ -81,6 +82,10 @@ class RegistrationConfig:
     """Rounds of model-guided matching and refinement after the first alignment (0 = none)."""
     first_search: float = 2.0
     """Search radius of the first guided matching through the charts, in ridge periods."""
+    grow_first_guess: bool = True
+    """Grow each pair's first guess through its charts corrected by the matches they gave
+    (:mod:`~fingersplat3d.align.correspond.chart_growth`): on a flat finger the cylinder charts' predictions hold only
+    mid-pad, and a wide pair's few first matches left its view unregistered."""
     guided_search: float = 0.7
     """Search radius of the model-guided rounds, in ridge periods (below half a period to one side
     of the prediction, a repeating ridge cannot be mistaken for its neighbour)."""
@@ -219,9 +224,20 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
 def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: RegistrationConfig,
                  zoom: float = 1.0) -> GuidedMatches:
     """A pair's first-guess matches: predicted through both charts shifted by ``shift`` (b seen ``zoom`` times as
-    large), searched ``first_search`` ridge periods around."""
-    return match_guided(prepared.maps[a], prepared.maps[b], ChartPredictor(charts[a], charts[b], shift, zoom),
-                        prepared.period, config.first_search * prepared.period)
+    large), searched ``first_search`` ridge periods around, then grown through the charts corrected by those matches
+    (:mod:`~fingersplat3d.align.correspond.chart_growth`, ``RegistrationConfig.grow_first_guess``)."""
+    chart = ChartPredictor(charts[a], charts[b], shift, zoom)
+
+    def match(predictor) -> GuidedMatches:
+        return match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period,
+                            config.first_search * prepared.period)
+
+    first = match(chart)
+    if not config.grow_first_guess:
+        return first
+    grown, _ = grow_first_guess(chart, first, match, lambda m: _verified(m, prepared.period, config), config.min_matches,
+                                0.1 * prepared.period)
+    return grown
 
 
 def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: int,
