@@ -71,17 +71,18 @@ def fit_chart_correction(chart: ChartPredictor, uv_a: np.ndarray, uv_b: np.ndarr
     if len(terms) < 2 * _TERMS:
         return np.zeros((_TERMS, 2))
     design = np.vstack([terms, _RIDGE * np.eye(_TERMS)])
+    target = np.vstack([offsets, np.zeros((_TERMS, 2))])
 
     def residuals(flat: np.ndarray) -> np.ndarray:
-        return (design @ flat.reshape(_TERMS, 2) - np.vstack([offsets, np.zeros((_TERMS, 2))])).ravel()
+        return (design @ flat.reshape(_TERMS, 2) - target).ravel()
 
     jacobian = np.kron(design, np.eye(2))  # the model is linear in the coefficients
     # Started from the plain least-squares fit: from no correction, the robust loss would weigh least the very offsets
     # the correction is for (a chart ten pixels off), and stay near the chart.
-    start = np.linalg.lstsq(design, np.vstack([offsets, np.zeros((_TERMS, 2))]), rcond=None)[0].ravel()
+    start = np.linalg.lstsq(design, target, rcond=None)[0].ravel()
     # The loss's scale from how far the matches lie from that fit (1.5 times the median), so that a match a ridge period
     # off (ridge texture repeats) weighs less than the bulk, however wide the bulk is; not under ``scale_px``.
-    spread = 1.5 * float(np.median(np.linalg.norm(residuals(start)[:2 * len(terms)].reshape(-1, 2), axis=1)))
+    spread = 1.5 * float(np.median(np.linalg.norm(terms @ start.reshape(_TERMS, 2) - offsets, axis=1)))
     solution = least_squares(residuals, start, jac=lambda flat: jacobian, loss="cauchy",
                              f_scale=max(spread, float(scale_px), 1e-3), method="trf")
     return solution.x.reshape(_TERMS, 2)
