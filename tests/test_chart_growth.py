@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from fingersplat3d.align.correspond.chart import CylinderChart
-from fingersplat3d.align.correspond.chart_growth import (GROWTH_ROUNDS, CorrectedChartPredictor, fit_chart_correction,
-                                                          grow_first_guess)
+from fingersplat3d.align.correspond.chart_growth import (CORRECTIONS, GROWTH_ROUNDS, CorrectedChartPredictor,
+                                                          fit_chart_correction, grow_first_guess)
 from fingersplat3d.align.correspond.chart_shift import ChartPredictor, ChartShift
 from fingersplat3d.align.correspond.guided import GuidedMatches
 
@@ -53,6 +53,38 @@ def test_the_correction_is_learned_from_the_matches_despite_wrong_ones(chart):
     assert np.median(miss) < 0.5 and miss.max() < 2.0  # the chart alone: up to ~8 px
     assert np.median(np.linalg.norm(chart(probe)[0] - _truth(chart, probe), axis=1)) > 3.0
     np.testing.assert_array_equal(corrected(probe)[1], chart(probe)[1])  # what b sees is the chart's call
+
+
+def test_a_correction_uses_only_its_own_terms(chart):
+    uv = _grid()
+    found = _truth(chart, uv)
+    for use in CORRECTIONS.values():
+        coefficients = fit_chart_correction(chart, uv, found, scale_px=1.0, use=use)
+        unused = np.setdiff1d(np.arange(len(coefficients)), use)
+        assert not np.any(coefficients[unused]) and np.all(np.isfinite(coefficients))
+    # the truth's error is cubic in the surface angle: the cubic fits it best, the plane worst
+    misses = {name: np.median(np.linalg.norm(CorrectedChartPredictor(chart, fit_chart_correction(
+        chart, uv, found, 1.0, use))(uv)[0] - found, axis=1)) for name, use in CORRECTIONS.items()}
+    assert misses["cubic"] < 0.1 < misses["plane"]
+
+
+def test_each_round_keeps_the_correction_that_verifies_most(chart):
+    """Which correction reaches farther is told by matching through each (a wide pair's first matches lie in a band
+    the cubic can swing off beyond): here only the plane's matches verify, and the growth follows it."""
+    uv = _grid()
+    plane_only = np.setdiff1d(np.arange(7), CORRECTIONS["plane"])
+    tried = []
+
+    def match(predictor):
+        tried.append(predictor)
+        plane = not np.any(predictor.coefficients[plane_only])
+        keep = np.arange(len(uv)) < (len(uv) if plane else 60)
+        return _matches(uv[keep], _truth(chart, uv)[keep])
+
+    first = _matches(uv[:60], _truth(chart, uv)[:60])
+    grown, rounds = grow_first_guess(chart, first, match, lambda m: m, min_matches=20, scale_px=1.0)
+    assert len(grown) == len(uv) and rounds == 1
+    assert len(tried) == 2 * len(CORRECTIONS)  # round 2 grew none and stopped
 
 
 def test_too_few_matches_leave_the_chart_as_it_is(chart):

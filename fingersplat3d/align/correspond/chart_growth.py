@@ -7,14 +7,23 @@ chart's turn between rolls -18 and 0 reads -10 degrees, and a pair 47 or 65 degr
 first-guess matches in the middle of its overlap. The first alignment of such a capture then follows the close pair's
 many matches (about 2,000) and the wide pair's few, slightly wrong ones, its relief comes out twice too deep, and the
 wide view ends 10-20 degrees off and unregistered (14 of the 84 triplets of the IMPOSE dev sample lost a view that way;
-3 with growth).
+3 with growth through the cubic alone, none with the nested corrections below).
 
 The chart's error is smooth over the skin: a function of where a point lies on a's chart, mostly of its surface angle.
-So the matches the chart gave, which are right, are used to learn it: a low-order polynomial in a's chart coordinates
-(surface angle up to the third power, distance along the finger up to the second), fitted to the verified matches'
-offsets from the chart's prediction by robust least squares, is added to the prediction, and the pair is matched again
-with the same search. Each round reaches skin a little farther from where the chart was right; the rounds stop when the
-verified matches no longer grow. Where the chart was right, the correction stays near zero and so do the matches.
+So the matches the chart gave, which are right, are used to learn it: a low-order polynomial in a's chart coordinates,
+fitted to the verified matches' offsets from the chart's prediction by robust least squares, is added to the
+prediction, and the pair is matched again with the same search. Each round reaches skin a little farther from where the
+chart was right; the rounds stop when the verified matches no longer grow. Where the chart was right, the correction
+stays near zero and so do the matches.
+
+Which polynomial is a question of reach. The first matches of a wide pair (60-90) lie in a band mid-pad, and the
+correction is needed beyond it: there a cubic fitted to that band can swing a ridge period or more off, while a plane
+in (surface angle, distance along) holds; once the matches cover the overlap, the cubic is what fits the flanks. Which
+one reaches farther is not told by the band's own residuals (chosen by held-out matches from the band's edges, three
+of eight wide pairs of the IMPOSE sample were left ungrown), so each round matches the pair through all three nested
+corrections (:data:`CORRECTIONS`: plane, quadratic in angle, cubic) and keeps the one that verifies most. Each one
+alone left one or more of those pairs under 100 verified matches; the best of the three grew all eight to 900-1,100.
+The cubic won none of their first rounds and most of their last ones.
 
 Pure numpy/scipy.
 """
@@ -29,7 +38,8 @@ from scipy.optimize import least_squares
 from .chart_shift import ChartPredictor
 from .guided import GuidedMatches
 
-__all__ = ["CorrectedChartPredictor", "fit_chart_correction", "grow_first_guess", "GROWTH_ROUNDS", "MIN_GROWTH"]
+__all__ = ["CorrectedChartPredictor", "fit_chart_correction", "grow_first_guess", "CORRECTIONS", "GROWTH_ROUNDS",
+           "MIN_GROWTH"]
 
 GROWTH_ROUNDS = 4
 """Rounds of matching again through the corrected charts, at most."""
@@ -37,6 +47,9 @@ MIN_GROWTH = 1.05
 """A round is kept when it verifies at least this many times as many matches as the best before it; else the rounds
 stop."""
 _TERMS = 7  # 1, theta, theta^2, theta^3, s, s theta, s^2 (s: distance along the finger over the chart radius)
+CORRECTIONS: dict[str, tuple[int, ...]] = {"plane": (0, 1, 4), "quadratic": (0, 1, 2, 4), "cubic": tuple(range(_TERMS))}
+"""The nested corrections each round tries, as the polynomial terms they use (indices into 1, theta, theta^2, theta^3,
+s, s theta, s^2; theta a's chart's surface angle, s the distance along the finger over the chart's radius)."""
 _RIDGE = 1e-2  # Tikhonov pull of each coefficient toward 0, in pixels (keeps terms the matches do not reach at 0)
 
 
@@ -60,21 +73,26 @@ class CorrectedChartPredictor:
         return predicted + _basis(self.chart, uv) @ self.coefficients, seen
 
 
-def fit_chart_correction(chart: ChartPredictor, uv_a: np.ndarray, uv_b: np.ndarray, scale_px: float) -> np.ndarray:
-    """``[7, 2]`` coefficients taking ``chart``'s predictions of ``uv_a`` to the matched ``uv_b``, by least squares with
-    a Cauchy loss (a wrong match weighs little; its scale 1.5 times the median miss of the plain least-squares fit it
-    starts from, at least ``scale_px``) and a light pull of every term toward zero."""
-    terms = _basis(chart, uv_a)
+def fit_chart_correction(chart: ChartPredictor, uv_a: np.ndarray, uv_b: np.ndarray, scale_px: float,
+                         use: tuple[int, ...] = CORRECTIONS["cubic"]) -> np.ndarray:
+    """``[7, 2]`` coefficients taking ``chart``'s predictions of ``uv_a`` to the matched ``uv_b`` with the terms ``use``
+    (the others 0), by least squares with a Cauchy loss (a wrong match weighs little; its scale 1.5 times the median
+    miss of the plain least-squares fit it starts from, at least ``scale_px``) and a light pull of every term toward
+    zero."""
+    use = list(use)
+    terms = _basis(chart, uv_a)[:, use]
     offsets = np.asarray(uv_b, np.float64) - chart(uv_a)[0]
     finite = np.isfinite(terms).all(1) & np.isfinite(offsets).all(1)
     terms, offsets = terms[finite], offsets[finite]
-    if len(terms) < 2 * _TERMS:
-        return np.zeros((_TERMS, 2))
-    design = np.vstack([terms, _RIDGE * np.eye(_TERMS)])
-    target = np.vstack([offsets, np.zeros((_TERMS, 2))])
+    coefficients = np.zeros((_TERMS, 2))
+    count = len(use)
+    if len(terms) < 2 * count:
+        return coefficients
+    design = np.vstack([terms, _RIDGE * np.eye(count)])
+    target = np.vstack([offsets, np.zeros((count, 2))])
 
     def residuals(flat: np.ndarray) -> np.ndarray:
-        return (design @ flat.reshape(_TERMS, 2) - target).ravel()
+        return (design @ flat.reshape(count, 2) - target).ravel()
 
     jacobian = np.kron(design, np.eye(2))  # the model is linear in the coefficients
     # Started from the plain least-squares fit: from no correction, the robust loss would weigh least the very offsets
@@ -82,10 +100,11 @@ def fit_chart_correction(chart: ChartPredictor, uv_a: np.ndarray, uv_b: np.ndarr
     start = np.linalg.lstsq(design, target, rcond=None)[0].ravel()
     # The loss's scale from how far the matches lie from that fit (1.5 times the median), so that a match a ridge period
     # off (ridge texture repeats) weighs less than the bulk, however wide the bulk is; not under ``scale_px``.
-    spread = 1.5 * float(np.median(np.linalg.norm(terms @ start.reshape(_TERMS, 2) - offsets, axis=1)))
+    spread = 1.5 * float(np.median(np.linalg.norm(terms @ start.reshape(count, 2) - offsets, axis=1)))
     solution = least_squares(residuals, start, jac=lambda flat: jacobian, loss="cauchy",
                              f_scale=max(spread, float(scale_px), 1e-3), method="trf")
-    return solution.x.reshape(_TERMS, 2)
+    coefficients[use] = solution.x.reshape(count, 2)
+    return coefficients
 
 
 def grow_first_guess(chart: ChartPredictor, first: GuidedMatches, match: Callable[[object], GuidedMatches],
@@ -93,16 +112,20 @@ def grow_first_guess(chart: ChartPredictor, first: GuidedMatches, match: Callabl
                      scale_px: float) -> tuple[GuidedMatches, int]:
     """The pair's first-guess matches grown (module docstring): ``first`` the matches through ``chart`` alone,
     ``match(predictor)`` matches the pair through a predictor, ``verify`` keeps the matches that agree on one epipolar
-    geometry. Grown only from at least ``min_matches`` verified ones (a pair the chart did not register stays as it
-    was). Returns the best matches and the rounds that grew them."""
+    geometry. Each round matches through each of :data:`CORRECTIONS` fitted to the verified matches so far and keeps
+    the one that verifies most. Grown only from at least ``min_matches`` verified ones (a pair the chart did not
+    register stays as it was). Returns the best matches and the rounds that grew them."""
     best, verified = first, verify(first)
     grown = 0
     for _ in range(GROWTH_ROUNDS):
         if len(verified) < min_matches:
             break
-        predictor = CorrectedChartPredictor(chart, fit_chart_correction(chart, verified.uv_a, verified.uv_b, scale_px))
-        trial = match(predictor)
-        checked = verify(trial)
+        trials = []
+        for use in CORRECTIONS.values():
+            trial = match(CorrectedChartPredictor(chart, fit_chart_correction(chart, verified.uv_a, verified.uv_b,
+                                                                               scale_px, use)))
+            trials.append((trial, verify(trial)))
+        trial, checked = max(trials, key=lambda tried: len(tried[1]))
         if len(checked) < MIN_GROWTH * len(verified):
             break
         best, verified, grown = trial, checked, grown + 1
