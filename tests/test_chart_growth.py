@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from fingersplat3d.align.correspond.chart import CylinderChart
-from fingersplat3d.align.correspond.chart_growth import (CORRECTIONS, GROWTH_ROUNDS, CorrectedChartPredictor,
-                                                          fit_chart_correction, grow_first_guess)
+from fingersplat3d.align.correspond.chart_growth import (CORRECTIONS, FEW_MATCHES, GROWTH_ROUNDS,
+                                                          CorrectedChartPredictor, fit_chart_correction, grow_first_guess)
 from fingersplat3d.align.correspond.chart_shift import ChartPredictor, ChartShift
 from fingersplat3d.align.correspond.guided import GuidedMatches
 
@@ -68,23 +68,28 @@ def test_a_correction_uses_only_its_own_terms(chart):
     assert misses["cubic"] < 0.1 < misses["plane"]
 
 
-def test_each_round_keeps_the_correction_that_verifies_most(chart):
-    """Which correction reaches farther is told by matching through each (a wide pair's first matches lie in a band
-    the cubic can swing off beyond): here only the plane's matches verify, and the growth follows it."""
+@pytest.mark.parametrize("first_count", [60, FEW_MATCHES])
+def test_a_pair_of_few_matches_is_grown_through_a_lower_correction_where_the_cubic_fails(chart, first_count):
+    """Which correction reaches farther is told by matching through it (a wide pair's first matches lie in a band the
+    cubic can swing off beyond): here only the plane's matches verify. With few first matches the growth tries it
+    after the cubic and follows it; with many, it stops at the cubic (each correction tried costs a matching)."""
     uv = _grid()
     plane_only = np.setdiff1d(np.arange(7), CORRECTIONS["plane"])
     tried = []
 
     def match(predictor):
-        tried.append(predictor)
         plane = not np.any(predictor.coefficients[plane_only])
-        keep = np.arange(len(uv)) < (len(uv) if plane else 60)
+        tried.append("plane" if plane else "other")
+        keep = np.arange(len(uv)) < (len(uv) if plane else first_count)
         return _matches(uv[keep], _truth(chart, uv)[keep])
 
-    first = _matches(uv[:60], _truth(chart, uv)[:60])
+    first = _matches(uv[:first_count], _truth(chart, uv)[:first_count])
     grown, rounds = grow_first_guess(chart, first, match, lambda m: m, min_matches=20, scale_px=1.0)
-    assert len(grown) == len(uv) and rounds == 1
-    assert len(tried) == 2 * len(CORRECTIONS)  # round 2 grew none and stopped
+    if first_count < FEW_MATCHES:
+        assert len(grown) == len(uv) and rounds == 1
+        assert tried == ["other", "plane", "other"]  # the cubic, then the plane, which grew; round 2 has many: the cubic
+    else:
+        assert grown is first and rounds == 0 and tried == ["other"]
 
 
 def test_too_few_matches_leave_the_chart_as_it_is(chart):

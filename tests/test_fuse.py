@@ -339,9 +339,9 @@ def test_a_close_pair_and_a_far_view_of_a_flat_finger_register(impose_dev, rolls
     """Another group's flat finger at rolls -18 / 0 / 47: the close pair's ~2,000 first matches and the far view's ~80,
     through cylinder charts that compress the turn across a flat pad, had put the first alignment 10-20 degrees off and
     left the far view unregistered. Grown through the charts corrected by their own matches
-    (align/correspond/chart_growth.py), the far pairs start from ~900-1,100 matches: measured 0.22 / 0.21 / 0.01 degrees.
-    At 48 degrees the far pairs' first matches (60 and 80) were grown only by trying three corrections each round (a
-    cubic alone lost the view): measured 0.21 / 0.20 / 0.01."""
+    (align/correspond/chart_growth.py), the far pairs start from ~600-800 matches: measured 0.24 / 0.22 / 0.02 degrees.
+    At 48 degrees the far pairs' first matches (60 and 80) grow only through a lower correction than the cubic (the
+    cubic alone lost the view): measured 0.24 / 0.21 / 0.02."""
     from fingersplat3d.io.datasets import load_any
 
     result = fuse(load_any([impose_dev / f"sample2_{roll}.png" for roll in rolls])[0], GEOMETRY)
