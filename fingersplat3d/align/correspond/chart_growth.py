@@ -126,15 +126,16 @@ def grow_first_guess(chart: ChartPredictor, first: GuidedMatches, match: Callabl
     for _ in range(GROWTH_ROUNDS):
         if len(verified) < min_matches:
             break
+        needed = MIN_GROWTH * len(verified)
         trials = []
         for use in CORRECTIONS.values():
             trial = match(CorrectedChartPredictor(chart, fit_chart_correction(chart, verified.uv_a, verified.uv_b,
                                                                                scale_px, use)))
             trials.append((trial, verify(trial)))
-            if len(trials[-1][1]) >= MIN_GROWTH * len(verified) or len(verified) >= FEW_MATCHES:
+            if len(trials[-1][1]) >= needed or len(verified) >= FEW_MATCHES:
                 break
         trial, checked = max(trials, key=lambda tried: len(tried[1]))
-        if len(checked) < MIN_GROWTH * len(verified):
+        if len(checked) < needed:
             break
         best, verified, grown = trial, checked, grown + 1
     return best, grown
