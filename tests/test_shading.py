@@ -12,7 +12,7 @@ from fingersplat3d.scene import Camera, View, look_at
 from fingersplat3d.splat import Gaussians, rgb_to_sh
 from fingersplat3d.splat.config import SplatConfig
 from fingersplat3d.splat.fit import fit_gaussians, render_camera
-from fingersplat3d.splat.shading import MAX_EXPONENT, MIN_FACING, facing_cosines, shade
+from fingersplat3d.splat.shading import MAX_EXPONENT, MIN_FACING, _facing_cosines_torch, facing_cosines, shade
 from fingersplat3d.splat.shading_estimate import estimate_shading
 
 SIZE = (128, 96)
@@ -96,6 +96,29 @@ def test_facing_cosines_follow_the_shortest_axis_and_stay_finite():
     values = facing_cosines(at_camera, torch.zeros(1, 4), flat, torch.as_tensor(camera.world_to_cam, dtype=torch.float32))
     assert torch.isfinite(values).all() and not values.requires_grad
     assert facing_cosines(torch.zeros(0, 3), torch.zeros(0, 4), torch.zeros(0, 3), torch.eye(4)).shape == (0,)
+
+
+def test_facing_cosines_on_the_cpu_are_the_tensor_formula():
+    """The CPU's compiled pass against the tensor version (CUDA's): random Gaussians, unnormalised and zero
+    quaternions, tied and extreme scales, a centre at the camera, non-finite positions."""
+    generator = torch.Generator().manual_seed(3)
+    count = 4000
+    means = torch.randn(count, 3, generator=generator) * 5.0
+    quats = torch.randn(count, 4, generator=generator) * torch.rand(count, 1, generator=generator) * 3.0
+    quats[:50] = 0.0
+    log_scales = torch.randn(count, 3, generator=generator) * 4.0
+    log_scales[50:100] = log_scales[50:100, :1]  # ties: the first smallest axis, as argmin
+    log_scales[100:150, 2] = -80.0
+    pose = torch.as_tensor(_camera(25.0).world_to_cam, dtype=torch.float32)
+    centre = -(pose[:3, :3].T @ pose[:3, 3])
+    means[150] = centre
+    means[151, 0] = float("inf")
+    means[152, 1] = float("nan")
+    compiled = facing_cosines(means, quats, log_scales, pose)
+    reference = _facing_cosines_torch(means, quats, log_scales, centre)
+    assert compiled.dtype == means.dtype and compiled.shape == (count,)
+    assert torch.isfinite(compiled).all() and bool(((compiled >= MIN_FACING) & (compiled <= 1.0)).all())
+    assert torch.allclose(compiled, reference, atol=2e-6)
 
 
 def test_a_model_without_exponent_renders_its_own_colours_and_one_with_it_darkens_the_flanks():

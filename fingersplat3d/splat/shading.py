@@ -20,7 +20,8 @@ not modelled: fitted per photo (with ``k`` learned along) they moved the held-ou
 added 0.1-0.5 dB.
 
 One number per capture where SH degree 1 would add nine per Gaussian; a model with ``k = 0`` renders
-exactly as the plain SH degree 0 model. Pure torch.
+exactly as the plain SH degree 0 model. Pure torch; on the CPU the cosines come from one compiled pass
+(:mod:`.cpu_shading`), the same formula.
 """
 from __future__ import annotations
 
@@ -44,10 +45,23 @@ def facing_cosines(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.T
         count = means.shape[0]
         if count == 0:
             return means.new_zeros(0)
-        rotation = quaternion_to_matrix(quats)  # [N, 3, 3], columns = principal axes; zero quaternion = identity
-        normals = rotation[torch.arange(count, device=means.device), :, log_scales.argmin(dim=1)]
         rotation_wc, translation = world_to_cam[:3, :3], world_to_cam[:3, 3]
         centre = -(rotation_wc.transpose(0, 1) @ translation)
+        if means.device.type == "cpu":
+            from .cpu_shading import facing_cosines_cpu
+
+            cosines = facing_cosines_cpu(*(t.detach().numpy() for t in (means, quats, log_scales, centre.double())), MIN_FACING)
+            return torch.from_numpy(cosines).to(means.dtype)
+        return _facing_cosines_torch(means, quats, log_scales, centre)
+
+
+def _facing_cosines_torch(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+                          centre: torch.Tensor) -> torch.Tensor:
+    """:func:`facing_cosines` in tensor operations (any device; the CPU's compiled pass is checked against it)."""
+    with torch.no_grad():
+        count = means.shape[0]
+        rotation = quaternion_to_matrix(quats)  # [N, 3, 3], columns = principal axes; zero quaternion = identity
+        normals = rotation[torch.arange(count, device=means.device), :, log_scales.argmin(dim=1)]
         towards = centre.to(means.dtype)[None] - means
         length = torch.linalg.vector_norm(towards, dim=1)
         cosine = (normals * towards).sum(dim=1).abs() / length.clamp_min(torch.finfo(means.dtype).tiny)

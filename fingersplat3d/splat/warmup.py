@@ -1,6 +1,6 @@
 """Compile the CPU rasterizer's numba kernels ahead of the work, and say so when that takes a while.
 
-The kernels (:mod:`.cpu_composite`, :mod:`.cpu_project`, and the alignment's
+The kernels (:mod:`.cpu_composite`, :mod:`.cpu_project`, :mod:`.cpu_shading`, and the alignment's
 :mod:`~fingersplat3d.align.solve.normal_matrix`, ~1 s of it) are compiled by numba on their first call and
 cached on disk beside the modules, so only the first run after an install pays (~50 s on 2 cores).
 ``tools/install.sh`` runs ``python3 -m fingersplat3d.splat.warmup`` so that a fresh install compiles them
@@ -18,6 +18,7 @@ __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
 KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
                 "cpu_project": ("_forward_kernel", "_forward_lanes", "project_backward", "_backward_lanes"),
+                "cpu_shading": ("_facing",),
                 "normal_matrix": ("_upper_gram",)}
 MESSAGE = "compiling the CPU rasterizer's kernels (once per install, ~50 s; cached on disk)"
 _warm = False
@@ -25,9 +26,10 @@ _warm = False
 
 def _kernels() -> list:
     from ..align.solve import normal_matrix
-    from . import cpu_composite, cpu_project
+    from . import cpu_composite, cpu_project, cpu_shading
 
-    modules = {"cpu_composite": cpu_composite, "cpu_project": cpu_project, "normal_matrix": normal_matrix}
+    modules = {"cpu_composite": cpu_composite, "cpu_project": cpu_project, "cpu_shading": cpu_shading,
+               "normal_matrix": normal_matrix}
     compositing = [kernel for pair in cpu_composite._KERNELS.values() for kernel in pair]
     return [getattr(modules[module], name) for module, names in KERNEL_NAMES.items() for name in names] + compositing
 
@@ -59,6 +61,9 @@ def warm_up() -> float:
         leaves = [leaf.clone().requires_grad_(True) for leaf in leaves]
         out = rasterize(*leaves, torch.eye(4), K, 32, 24, backend="numba")
         (out.color.sum() + out.depth.nan_to_num().sum()).backward()
+    from .shading import facing_cosines
+
+    facing_cosines(means, leaves[1].detach(), torch.log(leaves[2].detach()), torch.eye(4))  # the fit's shading
     import scipy.sparse as sparse
 
     from ..align.solve.normal_matrix import normal_matrix
