@@ -44,7 +44,9 @@ def add_splat_arguments(parser) -> None:
     splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=POSITIVE, dest="splat_gaussians_per_cell",
                        help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
                             "(--splat-budget-density: its former name)")
-    splat.add_argument("--no-pose-refinement", action="store_true", help="keep the cameras fixed while fitting")
+    splat.add_argument("--pose-refinement", action=argparse.BooleanOptionalAction, default=None,
+                       help="refine the camera poses while fitting (off by default: the registration's poses fit the "
+                            "ridges better than the refinement leaves them; measured in the README)")
     splat.add_argument("--no-shading", action="store_true",
                        help="one colour per Gaussian whatever the view (the paper's plain SH degree 0), instead of the "
                             "skin darkening with the slant at which each camera sees it")
@@ -66,7 +68,7 @@ def splat_config(args: argparse.Namespace):
     if args.no_splat:
         return None
     return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
-                  refine_poses=False if args.no_pose_refinement else None,
+                  refine_poses=args.pose_refinement,
                   facing_shading=False if getattr(args, "no_shading", False) else None)
 
 
