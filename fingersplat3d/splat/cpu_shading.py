@@ -1,8 +1,8 @@
 """The facing cosines of :mod:`.shading` on the CPU (numba): one pass over the Gaussians.
 
 :func:`.shading.facing_cosines` in tensor operations costs ~30 of them per render, each a pass over the Gaussians
-with its own allocation; at the fit's 50k Gaussians that was 6 ms a step on 2 cores (6 % of a ``balanced`` fit),
-here 0.2 ms. The same formula: the unit quaternion's rotation column of the smallest log-scale (the first
+with its own allocation; at the fit's 50k Gaussians that was 7 ms a step on 2 cores (6 % of a ``balanced`` step),
+here 0.7 ms with the conversions (measured on a Zen 3 EPYC, docs/measurements.md, stop 48). The same formula: the unit quaternion's rotation column of the smallest log-scale (the first
 smallest, as ``argmin``), ``|n . d| / |d|`` with ``d`` from the centre to the camera, 1 where that is not finite,
 held in ``[MIN_FACING, 1]``; float64 inside. ``tests/test_shading.py`` checks it against the tensor version.
 Pure numpy in, numpy out.

@@ -47,7 +47,7 @@ def facing_cosines(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.T
             return means.new_zeros(0)
         rotation_wc, translation = world_to_cam[:3, :3], world_to_cam[:3, 3]
         centre = -(rotation_wc.transpose(0, 1) @ translation)
-        if means.device.type == "cpu":
+        if means.device.type == "cpu" and means.dtype in (torch.float32, torch.float64):
             from .cpu_shading import facing_cosines_cpu
 
             cosines = facing_cosines_cpu(*(t.detach().numpy() for t in (means, quats, log_scales, centre.double())), MIN_FACING)
