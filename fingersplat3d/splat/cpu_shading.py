@@ -2,9 +2,9 @@
 
 :func:`.shading.facing_cosines` in tensor operations costs ~30 of them per render, each a pass over the Gaussians
 with its own allocation; at the fit's 50k Gaussians that was 7 ms a step on 2 cores (6 % of a ``balanced`` step),
-here 0.7 ms with the conversions (measured on a Zen 3 EPYC, docs/measurements.md, stop 48). The same formula: the unit quaternion's rotation column of the smallest log-scale (the first
-smallest, as ``argmin``), ``|n . d| / |d|`` with ``d`` from the centre to the camera, 1 where that is not finite,
-held in ``[MIN_FACING, 1]``; float64 inside. ``tests/test_shading.py`` checks it against the tensor version.
+here 0.7 ms with the conversions (measured on a Zen 3 EPYC, docs/measurements.md, stop 48). The same formula: the
+unit quaternion's rotation column of the smallest log-scale (the first smallest, as ``argmin``), ``|n . d| / |d|``
+with ``d`` from the centre to the camera, 1 where that is not finite, held in ``[MIN_FACING, 1]``; float64 inside. ``tests/test_shading.py`` checks it against the tensor version.
 Pure numpy in, numpy out.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .cpu_project import _quaternion_matrix, _unit_quaternion
+from .cpu_project import _finite, _quaternion_matrix, _unit_quaternion
 
 __all__ = ["facing_cosines_cpu"]
 
@@ -35,9 +35,7 @@ def _facing(means, quats, log_scales, centre, low, out):
         d0, d1, d2 = centre[0] - means[g, 0], centre[1] - means[g, 1], centre[2] - means[g, 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         cosine = abs(n0 * d0 + n1 * d1 + n2 * d2) / max(length, _TINY)
-        if not abs(cosine) < math.inf:
-            cosine = 1.0
-        out[g] = min(max(cosine, low), 1.0)
+        out[g] = min(max(cosine, low), 1.0) if _finite(cosine) else 1.0
 
 
 def facing_cosines_cpu(means: np.ndarray, quats: np.ndarray, log_scales: np.ndarray, centre: np.ndarray,

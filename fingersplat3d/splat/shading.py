@@ -50,8 +50,8 @@ def facing_cosines(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.T
         if means.device.type == "cpu" and means.dtype in (torch.float32, torch.float64):
             from .cpu_shading import facing_cosines_cpu
 
-            cosines = facing_cosines_cpu(*(t.detach().numpy() for t in (means, quats, log_scales, centre.double())), MIN_FACING)
-            return torch.from_numpy(cosines).to(means.dtype)
+            arrays = (t.detach().numpy() for t in (means, quats, log_scales, centre.double()))
+            return torch.from_numpy(facing_cosines_cpu(*arrays, MIN_FACING)).to(means.dtype)
         return _facing_cosines_torch(means, quats, log_scales, centre)
 
 
