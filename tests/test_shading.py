@@ -121,6 +121,20 @@ def test_facing_cosines_on_the_cpu_are_the_tensor_formula():
     assert torch.allclose(compiled, reference, atol=2e-6)
 
 
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_facing_cosines_on_a_gpu_are_the_cpus():
+    """A CUDA tensor takes the tensor formula on the GPU: the same cosines as the CPU's compiled pass, on the GPU."""
+    generator = torch.Generator().manual_seed(4)
+    means = torch.randn(5000, 3, generator=generator) * 5.0
+    quats = torch.randn(5000, 4, generator=generator)
+    quats[:20] = 0.0
+    log_scales = torch.randn(5000, 3, generator=generator) * 3.0
+    pose = torch.as_tensor(_camera(25.0).world_to_cam, dtype=torch.float32)
+    on_gpu = facing_cosines(*(t.cuda() for t in (means, quats, log_scales, pose)))
+    assert on_gpu.device.type == "cuda" and on_gpu.dtype == torch.float32
+    assert torch.allclose(on_gpu.cpu(), facing_cosines(means, quats, log_scales, pose), atol=2e-6)
+
+
 def test_a_model_without_exponent_renders_its_own_colours_and_one_with_it_darkens_the_flanks():
     plain, shaded = _half_cylinder(0.0), _half_cylinder(0.8)
     camera = _camera(0.0)
