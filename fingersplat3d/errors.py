@@ -12,7 +12,8 @@ Exit statuses of ``fs3d`` (documented in the README):
   identical or there is one view (the paper's monocular mode); ``fs3d rig calibrate`` when fewer
   than two captures registered with all their views;
 * 4 (:data:`EXIT_INCOMPLETE`): ``fs3d batch`` finished but some captures failed or were not
-  registered (``results.csv`` says which and why); the others are complete;
+  registered (``results.csv`` says which and why); the others are complete; likewise an evaluation or benchmark
+  with failed rows, and ``fs3d print`` when an input gave no print or a print too small for NFIQ2 (``prints.csv``);
 * 130: interrupted.
 """
 from __future__ import annotations

@@ -220,6 +220,34 @@ def test_fs3d_print_writes_prints_and_lists_what_failed(tmp_path, capsys):
     assert [row["name"] for row in csv.DictReader((out / "prints.csv").open())] == ["left"]
 
 
+@pytest.mark.skipif(not nbis_available(), reason="needs nbis-py (NFIQ2)")
+def test_a_print_smaller_than_nfiq2_scores_is_said_to_be_too_small():
+    from fingersplat3d.prints.make import _scores
+
+    y, x = np.mgrid[0:400, 0:400].astype(np.float32)
+    ridges = (127.5 + 100 * np.cos(2 * np.pi * (x + 0.3 * y) / 9.0)).astype(np.uint8)
+    small = np.full((400, 400), 255, np.uint8)
+    small[150:270, 140:240] = ridges[150:270, 140:240]  # 100 x 120 px of ridges: 5 x 6 mm at 500 ppi
+    scores = _scores(small, nfiq2=True)
+    assert scores["status"] == "too small" and "100x120 px" in scores["reason"] and scores["nfiq2"] == ""
+    assert "status" not in _scores(ridges, nfiq2=True)  # 400 x 400 px of ridges: scored
+    assert _scores(small, nfiq2=False) == {}  # not asked for: nothing said
+
+
+def test_fs3d_print_lists_a_print_too_small_for_nfiq2_and_still_writes_it(tmp_path, capsys, monkeypatch):
+    import fingersplat3d.prints.make as make
+
+    monkeypatch.setattr(make, "_scores", lambda image, nfiq2, centre_x=None: {
+        "nfiq2": "", "status": "too small", "reason": "its ridge area is 90x80 px, smaller than NFIQ2 scores"})
+    out = tmp_path / "prints"
+    assert main(["print", str(SAMPLE / "images" / "center.png"), "-o", str(out)]) == EXIT_INCOMPLETE
+    err = capsys.readouterr().err
+    assert "center: print too small: its ridge area is 90x80 px" in err and "1 print(s) too small for NFIQ2" in err
+    assert "gave no print" not in err and "Traceback" not in err
+    row = next(csv.DictReader((out / "prints.csv").open()))
+    assert row["status"] == "too small" and (out / "center.png").is_file()
+
+
 def test_fs3d_print_refuses_bad_arguments(tmp_path, capsys):
     assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--ppi", "0"]) == EXIT_INPUT
     assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--px-per-mm", "nan"]) == EXIT_INPUT

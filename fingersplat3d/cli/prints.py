@@ -20,7 +20,8 @@ def add(commands) -> None:
                     "surface unrolled by arc length, textured from the photos that see it most squarely, ridges dark, "
                     "tip up, ~500 ppi; for each image file, a contact-like print of the photo. Writes OUT/<name>.png, "
                     "OUT/masks/, OUT/points/ (per print pixel its 3D point on the model), OUT/pictures/ (each print beside "
-                    "its source) and OUT/prints.csv. Exit status 4 when some inputs gave no print (listed in prints.csv).")
+                    "its source) and OUT/prints.csv. Exit status 4 when some inputs gave no print, or a print too small for "
+                    "NFIQ2 (listed in prints.csv).")
     prints.add_argument("inputs", nargs="+", type=Path, help="reconstruction folders and/or image files")
     prints.add_argument("-o", "--output", type=Path, required=True, help="folder for the prints")
     prints.add_argument("--px-per-mm", type=PX_PER_MM,
@@ -65,16 +66,19 @@ def run(args: argparse.Namespace) -> int:
             rows.append(make_print(source, name, folder, px_per_mm=args.px_per_mm, ppi=args.ppi, ridges=args.ridges,
                                    nfiq2=not args.no_nfiq2, mirror=args.mirror, enhancer=args.enhance))
         write_rows(folder / "prints.csv", COLUMNS, rows)
-    failed = [row for row in rows if row["status"] != "done"]
+    failed = [row for row in rows if row["status"] == "failed"]
+    small = [row for row in rows if row["status"] == "too small"]
     for row in rows:
-        if row["status"] == "done":
+        if row["status"] != "failed":
             extra = f", {row['coverage_deg']:.0f} degrees of roll" if row["kind"] == "rolled" else ""
             score = f", NFIQ2 {row['nfiq2']}" if row.get("nfiq2") not in (None, "") else ""
             print(f"{row['name']}: {row['kind']} print {row['width_px']}x{row['height_px']} px{extra}{score}")
     print(f"wrote {args.output}")
-    if failed:
-        for row in failed:
-            print(f"fs3d print: {row['name']}: {row['reason']}", file=sys.stderr)
-        print(f"fs3d print: {len(failed)} of {len(rows)} inputs gave no print (see {args.output / 'prints.csv'})", file=sys.stderr)
+    for row in failed + small:
+        print(f"fs3d print: {row['name']}: {'' if row['status'] == 'failed' else 'print too small: '}{row['reason']}", file=sys.stderr)
+    counts = [f"{len(failed)} of {len(rows)} inputs gave no print"] if failed else []
+    counts += [f"{len(small)} print(s) too small for NFIQ2"] if small else []
+    if counts:
+        print(f"fs3d print: {', '.join(counts)} (see {args.output / 'prints.csv'})", file=sys.stderr)
         return EXIT_INCOMPLETE
     return 0

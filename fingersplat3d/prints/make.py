@@ -14,7 +14,9 @@ Writes ``OUT/<name>.png`` (8-bit gray, ridges dark, white outside the skin), ``O
 ``OUT/points/<name>.npy`` (rolled prints: ``[H, W, 3]`` float32 model points per print pixel, NaN
 outside: minutiae found on the print carried to the model, and through ``cameras.json`` to every
 photo), ``OUT/pictures/<name>.png`` (the print beside its source) and ``OUT/prints.csv``. An input that
-gives no print is a ``failed`` row with its reason; the others are still made.
+gives no print is a ``failed`` row with its reason; the others are still made. A print whose skin is smaller than
+NFIQ2 scores (197 px a side: 10 mm at 500 ppi, a finger too small in its photos for a usable print) is written but
+is a ``too small`` row, with the reason, when NFIQ2 was asked for.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FS3DError, InputError
-from ..eval.contact import TARGET_PERIOD_PX, ContactImage
+from ..eval.contact import MIN_SIDE, TARGET_PERIOD_PX, ContactImage
 from .rolled import RolledEquivalent
 
 __all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "print_photo", "ROLLED_PPI"]
@@ -131,14 +133,22 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
     if not nfiq2 or not nbis_available():
         return {}
     region = nfiq2_region(image, centre_x)
-    found = analyse(ContactImage.of_print(region))
+    contact = ContactImage.of_print(region)
+    found = analyse(contact)
     note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if region.shape != image.shape else "")
-    return {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
+    scores = {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
+    if not contact.fits_nfiq2:  # the region is cut to NFIQ2's largest size, so this is a print too small (or blank)
+        inked = np.nonzero(region < 255)
+        width, height = ((int(np.ptp(inked[1])) + 1, int(np.ptp(inked[0])) + 1) if len(inked[0]) else (0, 0))
+        scores.update(status="too small", reason=f"its ridge area is {width}x{height} px, smaller than NFIQ2 scores ({MIN_SIDE} "
+                                                 f"px a side): the finger is too small in the photos for a usable print")
+    return scores
 
 
 def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
                ridges: str = "bright", nfiq2: bool = True, mirror: bool = False, enhancer: str = "gabor") -> dict:
-    """One input's print written into ``out``; its ``prints.csv`` row (``status`` done or failed, with the reason).
+    """One input's print written into ``out``; its ``prints.csv`` row (``status`` done, failed or too small, with the
+    reason).
     ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad. ``enhancer``: of a model's
     print (:func:`~fingersplat3d.prints.rolled.rolled_print`)."""
     from ..io.images import write_image
@@ -176,7 +186,7 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
     write_image(out / "masks" / f"{name}.png", mask.astype(np.float32))
     picture = side_by_side([gray8(photo), image], PICTURE_HEIGHT, gap=12)  # the source beside its print
     write_image(out / "pictures" / f"{name}.png", picture.astype(np.float32) / 255.0)
-    scores = _scores(image, nfiq2, centre_x)
     row.update(status="done", reason="", width_px=image.shape[1], height_px=image.shape[0],
-               area_mm2=round(float(mask.sum()) / per_mm ** 2, 1), **scores, seconds=round(time.perf_counter() - started, 2))
+               area_mm2=round(float(mask.sum()) / per_mm ** 2, 1))
+    row.update(_scores(image, nfiq2, centre_x), seconds=round(time.perf_counter() - started, 2))
     return row
