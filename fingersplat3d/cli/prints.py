@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{row['name']}: {row['kind']} print {row['width_px']}x{row['height_px']} px{extra}{score}")
     print(f"wrote {args.output}")
     for row in failed + small:
-        print(f"fs3d print: {row['name']}: {'' if row['status'] == 'failed' else 'print too small: '}{row['reason']}", file=sys.stderr)
+        what = "" if row["status"] == "failed" else "print too small: "
+        print(f"fs3d print: {row['name']}: {what}{row['reason']}", file=sys.stderr)
     counts = [f"{len(failed)} of {len(rows)} inputs gave no print"] if failed else []
     counts += [f"{len(small)} print(s) too small for NFIQ2"] if small else []
     if counts:

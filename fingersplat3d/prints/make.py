@@ -140,8 +140,9 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
     if not contact.fits_nfiq2:  # the region is cut to NFIQ2's largest size, so this is a print too small (or blank)
         inked = np.nonzero(region < 255)
         width, height = ((int(np.ptp(inked[1])) + 1, int(np.ptp(inked[0])) + 1) if len(inked[0]) else (0, 0))
-        scores.update(status="too small", reason=f"its ridge area is {width}x{height} px, smaller than NFIQ2 scores ({MIN_SIDE} "
-                                                 f"px a side): the finger is too small in the photos for a usable print")
+        scores.update(status="too small", reason=f"its ridge area is {width}x{height} px, smaller than NFIQ2 scores "
+                                                 f"({MIN_SIDE} px a side): the finger is too small in the photos for a "
+                                                 "usable print")
     return scores
 
 
