@@ -485,7 +485,8 @@ def _refine_with_icp(capture: Capture, cameras: list[Camera], clouds: list, alig
 
 
 def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel: float):
-    """One Open3D cloud of the aligned views: voxel-thinned, outliers removed, normals facing the cameras."""
+    """One Open3D cloud of the aligned views: voxel-thinned, outliers removed, normals facing the cameras (the views'
+    depth-map normals, :func:`~fingersplat3d.scene.depth_normals`, averaged in each voxel)."""
     import open3d as o3d
 
     cloud = o3d.geometry.PointCloud()
@@ -497,7 +498,12 @@ def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel:
     if voxel > 0 and extent > 0:
         cloud = cloud.voxel_down_sample(voxel * extent)
     cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=3.0)
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
+    normals = np.asarray(cloud.normals) if cloud.has_normals() else np.zeros((0, 3))
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    if len(normals) == len(cloud.points) and np.all(length > 1e-6):  # the views' own, averaged by the voxels
+        cloud.normals = o3d.utility.Vector3dVector(normals / length)
+    else:  # none (or opposite ones met in a voxel): searched for
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
     _orient_outward(cloud, cameras, aligned)
     return cloud
 
@@ -511,12 +517,15 @@ def cloud_of_views(result: Reconstruction, views: Sequence[int], min_confidence:
 
 
 def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.ndarray, min_confidence: float):
+    """The view's depth as a coloured Open3D cloud in the world, with the depth map's own normals."""
     from .geometry import points_to_cloud
+    from .scene import depth_normals
 
     valid = np.isfinite(depth) & (confidence >= min_confidence) & view.mask
     pixels = np.argwhere(valid)[:, ::-1].astype(np.float64)
     points = camera.unproject(pixels, depth[valid])
-    return points_to_cloud(points, view.image[valid])
+    normals = depth_normals(camera, np.where(view.mask, depth, np.nan))[valid]
+    return points_to_cloud(points, view.image[valid], normals)
 
 
 def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict,

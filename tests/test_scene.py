@@ -168,3 +168,47 @@ def test_capture_access_and_unique_names():
         capture["nope"]
     with pytest.raises(ValueError, match="unique"):
         Capture((views[0], views[0]))
+
+
+def _sphere_depth(camera: Camera, centre: np.ndarray, radius: float) -> np.ndarray:
+    """The camera-frame depth of the near side of a sphere, NaN off it."""
+    rays = camera.pixel_directions(camera.pixel_grid())  # z = 1
+    c = camera.rotation @ centre + camera.translation
+    a, b, cc = (rays ** 2).sum(-1), -2 * rays @ c, c @ c - radius ** 2
+    disc = b ** 2 - 4 * a * cc
+    with np.errstate(invalid="ignore"):
+        return np.where(disc > 0, (-b - np.sqrt(disc)) / (2 * a), np.nan)
+
+
+def test_depth_normals_are_a_spheres_normals_facing_the_camera():
+    from fingersplat3d.scene import depth_normals
+
+    pose = look_at([30.0, -20.0, -100.0], [0.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+    camera = Camera(np.array([[900.0, 0, 150.0], [0, 800.0, 110.0], [0, 0, 1.0]]), pose, 320, 240)
+    centre, radius = np.array([2.0, -1.0, 3.0]), 8.0
+    depth = _sphere_depth(camera, centre, radius)
+    normals = depth_normals(camera, depth)
+    has = np.isfinite(depth)
+    assert has.sum() > 10_000 and np.array_equal(np.isfinite(normals).all(-1), has)
+    points = camera.unproject(camera.pixel_grid()[has], depth[has])
+    truth = (points - centre) / radius
+    found = normals[has]
+    assert np.allclose(np.linalg.norm(found, axis=1), 1.0)
+    inner = (np.degrees(np.arccos(np.clip((found * truth).sum(1), -1, 1))))
+    assert np.median(inner) < 0.05 and np.quantile(inner, 0.9) < 0.5  # the rim, grazing, is coarser
+    assert np.all(((camera.center - points) * found).sum(1) > 0)  # every one faces the camera
+
+
+def test_depth_normals_of_empty_and_tiny_maps_are_nan_and_finite_elsewhere():
+    from fingersplat3d.scene import depth_normals
+
+    camera = Camera.from_focal(100.0, 8, 6, np.eye(4))
+    assert np.isnan(depth_normals(camera, np.full((6, 8), np.nan))).all()
+    one = np.full((6, 8), np.nan)
+    one[3, 4] = 2.0  # a lone pixel has no neighbours: no normal to take
+    assert np.isnan(depth_normals(camera, one)).all()
+    flat = np.full((6, 8), 5.0)
+    flat[0, 0] = np.inf
+    normals = depth_normals(camera, np.where(np.isfinite(flat), flat, np.nan))
+    assert np.allclose(normals[1:, 1:], [0.0, 0.0, -1.0])  # a plane facing the camera (world = camera frame)
+    assert np.isnan(normals[0, 0]).all() and np.isfinite(normals[1:, 1:]).all()
