@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .scene import Capture, View
+from .scene import Capture, View, depth_normals
 
 if TYPE_CHECKING:  # pragma: no cover
     import open3d as o3d
@@ -43,24 +43,27 @@ def view_point_cloud(view: View, depth: np.ndarray | None = None, stride: int = 
                      estimate_normals: bool = True) -> "o3d.geometry.PointCloud":
     """Back-project a view's depth (its ground truth unless ``depth`` is given) to a coloured cloud.
 
-    Only finite depths inside the mask (when the view has one) become points; normals are
-    estimated from neighbours and oriented toward the camera.
+    Only finite, positive depths inside the mask (when the view has one) become points; with
+    ``estimate_normals``, each point's normal is the depth map's own (:func:`~fingersplat3d.scene.depth_normals`,
+    from its neighbours on the pixel grid, facing the camera).
     """
     if view.camera is None:
         raise ValueError(f"view {view.name!r} has no camera: cannot back-project its depth")
     depth = view.depth if depth is None else np.asarray(depth, np.float32)
     if depth is None:
         raise ValueError(f"view {view.name!r} has no depth map")
-    valid = np.isfinite(depth) & (depth > 0)
+    with np.errstate(invalid="ignore"):
+        surface = np.isfinite(depth) & (depth > 0)
     if view.mask is not None:
-        valid &= view.mask
-    valid &= _stride_mask(depth.shape, stride)
+        surface &= view.mask
+    valid = surface & _stride_mask(depth.shape, stride)
     pixels = np.argwhere(valid)[:, ::-1].astype(np.float64)
     points = view.camera.unproject(pixels, depth[valid])
-    cloud = points_to_cloud(points, view.image[valid])
+    normals = None
     if estimate_normals and len(points) >= 3:
-        _estimate_normals(cloud, view.camera.center)
-    return cloud
+        normals = depth_normals(view.camera, np.where(surface, depth, np.nan))[valid]
+        normals[~np.isfinite(normals).all(1)] = 0.0  # a pixel with no neighbour on the map: no direction
+    return points_to_cloud(points, view.image[valid], normals)
 
 
 def capture_point_cloud(capture: Capture, voxel_mm: float | None = None, stride: int = 1) -> "o3d.geometry.PointCloud":
@@ -83,11 +86,3 @@ def _stride_mask(shape: tuple[int, int], stride: int) -> np.ndarray:
     keep[::stride, ::stride] = True
     return keep
 
-
-def _estimate_normals(cloud: "o3d.geometry.PointCloud", camera_center: np.ndarray) -> None:
-    import open3d as o3d
-
-    points = np.asarray(cloud.points)
-    extent = np.linalg.norm(points.max(0) - points.min(0))
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(extent * 0.02, 1e-9), max_nn=30))
-    cloud.orient_normals_towards_camera_location(camera_center)

@@ -517,15 +517,10 @@ def cloud_of_views(result: Reconstruction, views: Sequence[int], min_confidence:
 
 
 def _world_cloud(view: View, camera: Camera, depth: np.ndarray, confidence: np.ndarray, min_confidence: float):
-    """The view's depth as a coloured Open3D cloud in the world, with the depth map's own normals."""
-    from .geometry import points_to_cloud
-    from .scene import depth_normals
+    """The view's confident depth as a coloured Open3D cloud in the world, with the depth map's own normals."""
+    from .geometry import view_point_cloud
 
-    valid = np.isfinite(depth) & (confidence >= min_confidence) & view.mask
-    pixels = np.argwhere(valid)[:, ::-1].astype(np.float64)
-    points = camera.unproject(pixels, depth[valid])
-    normals = depth_normals(camera, np.where(view.mask, depth, np.nan))[valid]
-    return points_to_cloud(points, view.image[valid], normals)
+    return view_point_cloud(view.with_(camera=camera), np.where(confidence >= min_confidence, depth, np.nan))
 
 
 def _metric_scale(config: FuseConfig, cameras: list[Camera], depths: list[np.ndarray], cloud, report: dict,
