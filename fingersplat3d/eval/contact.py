@@ -64,13 +64,17 @@ class ContactImage:
         return (xy - self.affine[:, 2]) @ np.linalg.inv(self.affine[:, :2]).T
 
     @property
+    def ridge_area_size(self) -> tuple[int, int]:
+        """``(width, height)`` px of the inked part's bounding box; ``(0, 0)`` for a blank print."""
+        rows, cols = np.nonzero(self.image < 255)
+        if len(rows) == 0:
+            return 0, 0
+        return int(cols.max() - cols.min() + 1), int(rows.max() - rows.min() + 1)
+
+    @property
     def fits_nfiq2(self) -> bool:
         """Whether the print's ridge area is within NFIQ2's size limits."""
-        inked = self.image < 255
-        if not inked.any():
-            return False
-        rows, cols = np.nonzero(inked)
-        width, height = cols.max() - cols.min() + 1, rows.max() - rows.min() + 1
+        width, height = self.ridge_area_size
         return MIN_SIDE <= width <= MAX_SIZE[0] and MIN_SIDE <= height <= MAX_SIZE[1]
 
 

@@ -138,8 +138,7 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
     note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if region.shape != image.shape else "")
     scores = {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
     if not contact.fits_nfiq2:  # the region is cut to NFIQ2's largest size, so this is a print too small (or blank)
-        inked = np.nonzero(region < 255)
-        width, height = ((int(np.ptp(inked[1])) + 1, int(np.ptp(inked[0])) + 1) if len(inked[0]) else (0, 0))
+        width, height = contact.ridge_area_size
         scores.update(status="too small", reason=f"its ridge area is {width}x{height} px, smaller than NFIQ2 scores "
                                                  f"({MIN_SIDE} px a side): the finger is too small in the photos for a "
                                                  "usable print")
