@@ -498,10 +498,8 @@ def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel:
     if voxel > 0 and extent > 0:
         cloud = cloud.voxel_down_sample(voxel * extent)
     cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=3.0)
-    normals = np.asarray(cloud.normals) if cloud.has_normals() else np.zeros((0, 3))
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    if len(normals) == len(cloud.points) and np.all(length > 1e-6):  # the views' own, averaged by the voxels
-        cloud.normals = o3d.utility.Vector3dVector(normals / length)
+    if cloud.has_normals() and np.all(np.linalg.norm(np.asarray(cloud.normals), axis=1) > 1e-6):
+        cloud.normalize_normals()  # the views' own, averaged (and so shortened) by the voxels
     else:  # none (or opposite ones met in a voxel): searched for
         cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.02 * extent, max_nn=30))
     _orient_outward(cloud, cameras, aligned)

@@ -4,7 +4,8 @@
 with its own allocation; at the fit's 50k Gaussians that was 7 ms a step on 2 cores (6 % of a ``balanced`` step),
 here 0.7 ms with the conversions (measured on a Zen 3 EPYC, docs/measurements.md, stop 48). The same formula: the
 unit quaternion's rotation column of the smallest log-scale (the first smallest, as ``argmin``), ``|n . d| / |d|``
-with ``d`` from the centre to the camera, 1 where that is not finite, held in ``[MIN_FACING, 1]``; float64 inside. ``tests/test_shading.py`` checks it against the tensor version.
+with ``d`` from the centre to the camera, 1 where that is not finite, held in ``[MIN_FACING, 1]``; float64 inside.
+``tests/test_shading.py`` checks it against the tensor version.
 Pure numpy in, numpy out.
 """
 from __future__ import annotations
