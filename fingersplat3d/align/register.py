@@ -130,11 +130,17 @@ class RegistrationConfig:
     weakest real pair with its contrast halved (vote 1.18 times its rival) agrees at 0.40 and is placed (the
     capture's three turns then 0.5-1.9 degrees from the rig's mean); a left-right mirrored side view's peaks agree at
     0.11-0.18, another finger's at 0; synthetic views with every vote undecided at 0.65-1.0."""
-    undecided_min_votes: int = 10
+    undecided_min_votes: int = 5
     """The votes a peak needs to be tried so (``MIN_SUPPORT``, 18, for a decisive vote): through the model, not the vote,
     decides. Measured on real captures cropped to no fingertip (docs/measurements.md): their front-side votes' right
-    peaks hold 12-17 votes; 2_2_7_1's, 14 votes at -44.6 degrees, agrees at 0.63 and places its view. Views of other
-    fingers agreed at 0.04-0.10 and a mirrored view at 0.18 at best when tried at every turn of a grid."""
+    peaks hold 6-17 votes (2_2_7_1's 9 votes at -53.7 degrees agrees at 0.64, 2_2_6_1's 6 at -38.3 at 0.75, and each
+    places its view; at 10 votes, before, both views were lost). Views of other fingers agreed at 0.04-0.10 and a
+    mirrored view at 0.18 at best when tried at every turn of a grid; the 18 captures of two fingers' views, tried from
+    5 votes and 20 matches, at 0.11 at best."""
+    undecided_min_matches: int = 20
+    """The verified first-guess matches such a peak needs to be grown and tried through the model (``min_matches``, 40,
+    for a decisive vote): a narrow crop's right peak verified 26 matches, which its growth took to 136, agreeing at
+    0.75."""
     undecided_agreement: float = 0.25
     """The agreement through the model a peak must reach to place a view no decisive vote placed: twice
     ``min_agreement``, above a mirrored view's 0.18 (one finger's views at full contrast: 0.27-0.86 on the real
@@ -441,6 +447,8 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
 
     depths, focals = [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps]
     period = prepared.period
+    # A peak's first guess is grown and verified from fewer matches: the agreement through the model decides.
+    trying = replace(config, min_matches=min(config.min_matches, config.undecided_min_matches))
     done = set()  # pairs tried: a view placed here can reach further views on the next pass
     placing = True
     while placing:
@@ -463,9 +471,9 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     record.setdefault("undecided_peaks", []).append(entry)
                     if shift.support < config.undecided_min_votes:
                         continue
-                    verified = _verified(_chart_guess(prepared, a, b, charts, shift, config, zoom), period, config)
+                    verified = _verified(_chart_guess(prepared, a, b, charts, shift, trying, zoom), period, trying)
                     entry["matches"] = len(verified)
-                    if len(verified) < config.min_matches:
+                    if len(verified) < trying.min_matches:
                         continue
                     first, _ = _similar_pair(pointmaps, a, b, verified, config, rng)
                     if first is None:
