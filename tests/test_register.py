@@ -183,3 +183,23 @@ def test_a_narrow_real_crop_places_its_view_from_a_weak_peak_through_the_model(r
     assert any(peak["votes"] < 10 or peak["matches"] < 40 for peak in tried), placing
     rotations = [pose[:3, :3] for pose in result.alignment.world_to_cam]
     assert 30.0 <= rotation_angle_deg(rotations[1], rotations[0]) <= 60.0
+
+
+def test_views_from_one_place_count_as_one_viewpoint():
+    """Optical axes 1 degree apart are one viewpoint, 6 degrees apart two; a camera turned about its own optical axis
+    (a portrait-stored photo) stays where it was; views left out are not counted."""
+    from scipy.spatial.transform import Rotation
+
+    from fingersplat3d.align.register import distinct_viewpoints
+
+    def camera(turn_deg, roll_deg=0.0):
+        pose = np.eye(4)
+        pose[:3, :3] = (Rotation.from_euler("z", roll_deg, degrees=True)
+                        * Rotation.from_euler("y", turn_deg, degrees=True)).as_matrix()
+        return pose
+
+    poses = [camera(0.0), camera(47.0), camera(48.0), camera(0.5, roll_deg=90.0), camera(6.0)]
+    assert distinct_viewpoints(poses, [0, 1, 2]) == 2
+    assert distinct_viewpoints(poses, [0, 3]) == 1
+    assert distinct_viewpoints(poses, [0, 1, 4]) == 3
+    assert distinct_viewpoints(poses, []) == 0

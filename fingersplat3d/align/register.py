@@ -60,15 +60,21 @@ from .solve.rig import Rig, rig_align
 from .solve.sensitivity import focal_probe
 from .width_check import least_turns_deg
 
-__all__ = ["RegistrationConfig", "Registration", "register_views", "MATCHERS"]
+__all__ = ["RegistrationConfig", "Registration", "register_views", "distinct_viewpoints", "MATCHERS"]
 
 MATCHERS = ("surface", "minutiae", "sift", "rootsift", "akaze")
 
 
 CONTOUR_MIN_VIEWS = 3
-"""Silhouette contours join the alignment from this many aligned views: with two, the turn and the relief trade
-freely (bas-relief), and pulling the surface onto the other outline moved the turn instead (ring rig, 2 views:
-rotation 0.89 -> 1.62 degrees); with three or more the matches hold the turns and the contours shape the skin."""
+"""Silhouette contours join the alignment from this many aligned views seen from distinct places
+(:data:`DISTINCT_VIEW_DEG`): with two, the turn and the relief trade freely (bas-relief), and pulling the surface onto
+the other outline moved the turn instead (ring rig, 2 views: rotation 0.89 -> 1.62 degrees); with three or more the
+matches hold the turns and the contours shape the skin."""
+DISTINCT_VIEW_DEG = 5.0
+"""Views whose optical axes lie closer than this see the finger from one place and count as one for
+:data:`CONTOUR_MIN_VIEWS`: three views of which two are 1 degree apart are two views for the bas-relief. Measured on
+another group's renders, a view beside the rolls 47 and 48: -18 / 47 / 48, -13 / 47 / 48, 0 / 47 / 48 came out 4.71,
+3.92, 3.11 degrees off with the contours and 0.89, 0.16, 1.46 without (docs/measurements.md)."""
 
 
 @dataclass(frozen=True)
@@ -114,8 +120,8 @@ class RegistrationConfig:
     synthetic depth better nor move the turns (docs/fuse.md)."""
     contour_weight: float = 1.0
     """Weight of each silhouette-contour correspondence (:mod:`~fingersplat3d.align.correspond.contours`) against a
-    matched pair's (0 to 1 by its score) in the guided rounds' alignments, with :data:`CONTOUR_MIN_VIEWS` views or
-    more; 0 turns them off. Measured (3 seeds): whole-view depth error ring 3 / 5 views 0.109 / 0.064 -> 0.059 /
+    matched pair's (0 to 1 by its score) in the guided rounds' alignments, with :data:`CONTOUR_MIN_VIEWS` distinct views
+    or more; 0 turns them off. Measured (3 seeds): whole-view depth error ring 3 / 5 views 0.109 / 0.064 -> 0.059 /
     0.041 mm, uwa 0.112 -> 0.071, cfpose 3 / 5 0.116 / 0.091 -> 0.066 / 0.058; real rig deviation finger 1 (tuned)
     0.62 / 1.09 / 1.20 -> 0.74 / 0.65 / 1.25 degrees, max 4.9 -> 2.3, finger 2 (held out) 0.81 / 1.24 / 1.49 -> 0.28 /
     1.10 / 1.00, max 3.8. Weight 0.3 and the outline itself instead of a pixel inside it were no better."""
@@ -283,7 +289,7 @@ def _contours(alignment, prepared: _Prepared, config: RegistrationConfig) -> lis
     """Every aligned view's surface against every other aligned view's outline
     (:mod:`~fingersplat3d.align.correspond.contours`), as one-way correspondences."""
     placed = [v for v, ok in enumerate(alignment.aligned) if ok]
-    if config.contour_weight <= 0 or len(placed) < CONTOUR_MIN_VIEWS:
+    if config.contour_weight <= 0 or distinct_viewpoints(alignment.world_to_cam, placed) < CONTOUR_MIN_VIEWS:
         return []
     found = []
     for a in placed:
@@ -296,6 +302,20 @@ def _contours(alignment, prepared: _Prepared, config: RegistrationConfig) -> lis
                 found.append(PairCorrespondences(a, b, uv_a, uv_b, np.full(len(uv_a), config.contour_weight), np.eye(4),
                                                  np.zeros_like(information), information))
     return found
+
+
+def distinct_viewpoints(world_to_cam, views) -> int:
+    """How many of ``views`` see the finger from distinct places: each counts unless its optical axis lies within
+    :data:`DISTINCT_VIEW_DEG` of a view counted before (a turn about the optical axis alone, a portrait-stored
+    photo, is the same place)."""
+    cosine = np.cos(np.radians(DISTINCT_VIEW_DEG))
+    counted: list[np.ndarray] = []
+    for v in views:
+        axis = np.asarray(world_to_cam[v], np.float64)[2, :3]  # the camera's viewing direction in the world
+        axis = axis / np.linalg.norm(axis)
+        if all(float(axis @ other) < cosine for other in counted):
+            counted.append(axis)
+    return len(counted)
 
 
 def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.ndarray, cap: int = 0) -> PairCorrespondences:
