@@ -360,7 +360,7 @@ def test_a_view_beside_two_views_from_one_place_registers_as_two_views_would(imp
     """Another group's renders at rolls -13 / 47 / 48: the last two see the finger from one place (1 degree apart), so
     for the bas-relief the capture is two views, and the silhouette contours, which three distinct views need, had
     pulled the turn instead of the surface: measured 3.92 degrees off with them, 0.16 without (align/register.py,
-    DISTINCT_VIEW_DEG)."""
+    distinct_viewpoints)."""
     from fingersplat3d.io.datasets import load_any
 
     rolls = (-13, 47, 48)

@@ -58,6 +58,7 @@ from .solve.global_opt import (PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignme
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
 from .solve.sensitivity import focal_probe
+from .transfer import MIN_PARALLAX_DEG
 from .width_check import least_turns_deg
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "distinct_viewpoints", "MATCHERS"]
@@ -67,14 +68,12 @@ MATCHERS = ("surface", "minutiae", "sift", "rootsift", "akaze")
 
 CONTOUR_MIN_VIEWS = 3
 """Silhouette contours join the alignment from this many aligned views seen from distinct places
-(:data:`DISTINCT_VIEW_DEG`): with two, the turn and the relief trade freely (bas-relief), and pulling the surface onto
-the other outline moved the turn instead (ring rig, 2 views: rotation 0.89 -> 1.62 degrees); with three or more the
-matches hold the turns and the contours shape the skin."""
-DISTINCT_VIEW_DEG = 5.0
-"""Views whose optical axes lie closer than this see the finger from one place and count as one for
-:data:`CONTOUR_MIN_VIEWS`: three views of which two are 1 degree apart are two views for the bas-relief. Measured on
-another group's renders, a view beside the rolls 47 and 48: -18 / 47 / 48, -13 / 47 / 48, 0 / 47 / 48 came out 4.71,
-3.92, 3.11 degrees off with the contours and 0.89, 0.16, 1.46 without (docs/measurements.md)."""
+(:func:`distinct_viewpoints`): with two, the turn and the relief trade freely (bas-relief), and pulling the surface
+onto the other outline moved the turn instead (ring rig, 2 views: rotation 0.89 -> 1.62 degrees); with three or more
+the matches hold the turns and the contours shape the skin. Three views of which two are 1 degree apart are two views
+for the bas-relief: measured on another group's renders, a view beside the rolls 47 and 48 (-18 / 47 / 48,
+-13 / 47 / 48, 0 / 47 / 48) came out 4.71, 3.92, 3.11 degrees off with the contours and 0.89, 0.16, 1.46 without
+(docs/measurements.md)."""
 
 
 @dataclass(frozen=True)
@@ -306,9 +305,9 @@ def _contours(alignment, prepared: _Prepared, config: RegistrationConfig) -> lis
 
 def distinct_viewpoints(world_to_cam, views) -> int:
     """How many of ``views`` see the finger from distinct places: each counts unless its optical axis lies within
-    :data:`DISTINCT_VIEW_DEG` of a view counted before (a turn about the optical axis alone, a portrait-stored
-    photo, is the same place)."""
-    cosine = np.cos(np.radians(DISTINCT_VIEW_DEG))
+    :data:`~fingersplat3d.align.transfer.MIN_PARALLAX_DEG` (the parallax that backs a depth) of a view counted before
+    (a turn about the optical axis alone, a portrait-stored photo, is the same place)."""
+    cosine = np.cos(np.radians(MIN_PARALLAX_DEG))
     counted: list[np.ndarray] = []
     for v in views:
         axis = np.asarray(world_to_cam[v], np.float64)[2, :3]  # the camera's viewing direction in the world
