@@ -67,8 +67,10 @@ def test_no_surface_or_no_outline_gives_none():
     assert len(contour_correspondences(alignment, [masks[0], np.zeros_like(masks[1]), masks[2]], 0, 1, period_px=8.0)[0]) == 0
 
 
-def test_the_registration_adds_contours_from_three_views_only():
-    from fingersplat3d.align.register import CONTOUR_MIN_VIEWS, RegistrationConfig, _contours, _Prepared
+def test_the_registration_adds_contours_from_three_views_or_two_with_the_focal_held():
+    from fingersplat3d.align.register import (CONTOUR_MIN_VIEWS, CONTOUR_MIN_VIEWS_FOCAL_HELD, RegistrationConfig,
+                                              _contours, _Prepared)
+    from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
 
     views, alignment = _truth()
     prepared = _Prepared(textures=[], masks=[v.mask for v in views], grays=[], period=8.0)
@@ -79,3 +81,12 @@ def test_the_registration_adds_contours_from_three_views_only():
     off = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, True]), prepared,
                     RegistrationConfig(contour_weight=0.0))
     assert two == [] and off == []
+    # With the focal held (--focal-px, EXIF) two views' turn no longer slides with it: their contours join.
+    held = RegistrationConfig(global_align=GlobalAlignConfig(optimize_focal=False))
+    two_held = _contours(SimpleNamespace(**vars(alignment), aligned=[True, True, False]), prepared, held)
+    assert CONTOUR_MIN_VIEWS_FOCAL_HELD == 2 and len(two_held) == 2  # left against the front outline, and back
+    assert {(pair.a, pair.b) for pair in two_held} == {(0, 1), (1, 0)}
+    # Two photos from one place are still one viewpoint.
+    same_place = SimpleNamespace(**{**vars(alignment), "world_to_cam": [alignment.world_to_cam[1]] * 3},
+                                 aligned=[True, True, False])
+    assert _contours(same_place, prepared, held) == []
