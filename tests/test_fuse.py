@@ -430,8 +430,9 @@ def test_a_known_focal_is_kept_and_fixes_the_turn_of_two_views(uwa):
 def test_two_views_with_the_focal_held_take_the_silhouette_contours():
     """With the focal held, two views' turn no longer slides with it, so the silhouette contours join their alignment
     and shape the skin only one of them sees (align/register.py, CONTOUR_MIN_VIEWS_FOCAL_HELD): seed 2's left and
-    centre views, whole-view depth error measured 0.111 / 0.115 mm without them, 0.036 / 0.043 mm with them; the
-    turn 0.25 / 0.30 degrees off (six kinds of pairs, seeds 0-2: docs/measurements.md)."""
+    centre views, whole-view depth error (mean of the two, worst) 0.111 (0.115) mm without them, 0.036 (0.043)
+    with them; the turn 0.25 degrees off without them, 0.30 with them (six kinds of pairs, 3-5 seeds each:
+    docs/measurements.md)."""
     capture = synthesize(2, SynthConfig(size=(640, 512))).capture
     views = [capture["left"], capture["center"]]
     two = Capture(tuple(v.with_(camera=None, depth=None) for v in views), capture.metadata)
