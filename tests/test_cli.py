@@ -143,7 +143,42 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].endswith("2 reconstruction folders") and lines[1].startswith("  c2: registered 2 of 3")
     assert "1 warning(s)" in lines[2]
+    assert not any(line.startswith("focal fitted") for line in lines)  # no focal probe, a view unregistered
     (rec / "report.json").write_text("{not json")
     assert main(["info", str(rec), "--json"]) == 0  # the cameras still described, the report's state said
     described = json.loads(capsys.readouterr().out)[0]
     assert len(described["pairs"]) == 3 and "report.json could not be read" in described["warnings"][0]
+
+
+def test_info_offers_a_batch_the_median_of_its_fitted_focals(tmp_path, capsys):
+    """A batch's three-view reconstructions whose photos held a fitted focal: their median, offered as --focal-px (a
+    camera stored portrait counts with its landscape twins); one focal given (no probe), one with a view unregistered
+    and one of another photo size do not count."""
+    from fingersplat3d.cli.info import shared_focal
+    from fingersplat3d.io.cameras import write_cameras
+    from fingersplat3d.scene import Camera
+
+    batch = tmp_path / "batch"
+    cases = {"c1": (1500.0, True, True, (640, 512)), "c2": (1600.0, True, True, (640, 512)),
+             "c3": (1900.0, True, True, (640, 512)), "portrait": (1700.0, True, True, (512, 640)),
+             "given": (1000.0, None, True, (640, 512)), "lost": (1200.0, True, False, (640, 512)),
+             "other": (3000.0, True, True, (1280, 1024))}
+    for name, (focal, held, third, (width, height)) in cases.items():
+        rec = batch / name
+        rec.mkdir(parents=True)
+        write_cameras(rec / "cameras.json", [(v, f"{v}.png", Camera.from_focal(focal, width, height, np.eye(4)))
+                                             for v in ("a", "b", "c")])
+        alignment = {"mode": "multi-view", "aligned": {"a": True, "b": True, "c": third}, "residual_px": 0.4}
+        if held is not None:
+            alignment["focal_probe"] = {"held": held, "longer_loss_rise": 0.05}
+        (rec / "report.json").write_text(json.dumps({"alignment": alignment}))
+    assert main(["info", str(batch)]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith("focal fitted by 4 of them (640x512")
+    assert "median 1650 px, 1500-1900 px (spread 24 %)" in last
+    assert last.endswith("--focal-px 1650")
+    assert shared_focal([]) is None
+    one = {"focal_held_by_photos": True, "views": [{"size": "640x512", "focal_px": 1500.0, "registered": True}] * 3}
+    assert shared_focal([one]) is None  # one capture: nothing to share
+    weak = {**one, "focal_held_by_photos": False}
+    assert shared_focal([one, weak]) is None  # a focal its photos did not hold does not count

@@ -18,7 +18,9 @@ def add(commands) -> None:
                                description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds, "
                                            "or what a reconstruction folder from 'fs3d fuse' says of its views: "
                                            "registered or not, focal, the share of each view backed by a second one, "
-                                           "each pair's turn and how sure it is, the run's warnings.")
+                                           "each pair's turn and how sure it is, the run's warnings; of a folder of "
+                                           "reconstructions ('fs3d batch -o'), a line each and the median of the "
+                                           "focals their photos held, to fuse them all with (--focal-px).")
     info.add_argument("path", type=Path, nargs="+", help="capture folder, dataset folder, reconstruction folder or image files")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(run=run)
@@ -106,6 +108,29 @@ def _reconstructions_in(folder: Path) -> list[Path]:
     return sorted((p for p in folder.iterdir() if p.is_dir() and is_reconstruction_folder(p)), key=lambda p: natural_key(p.name))
 
 
+def shared_focal(described: list[dict]) -> dict | None:
+    """The focal a batch's captures could share (``--focal-px``): the median of the focals fitted by the reconstructions
+    with three views or more, all registered, whose photos held their focal (the report's focal probe; a focal given
+    or taken from a rig has none), among those of the most common first-view size, either way round (a focal is in its
+    photo's pixels); None with fewer than two. Three cameras on a ring see their focal weakly, and it is what varies
+    most from capture to capture: held alike, the real dev captures' turns agree within 0.5-0.9 degrees per pair,
+    0.7-1.25 fitted one by one (docs/measurements.md, "The rig's remaining error is the focal's spread")."""
+    fitted = [one for one in described
+              if one.get("focal_held_by_photos") is True and len(one["views"]) >= 3
+              and all(view["registered"] for view in one["views"])]
+    # the photo's size, long side first: a camera stored portrait has the same focal in pixels
+    sizes = ["x".join(sorted(one["views"][0]["size"].split("x"), key=int, reverse=True)) for one in fitted]
+    if len(fitted) < 2:
+        return None
+    size = max(set(sizes), key=sizes.count)
+    focals = np.array([one["views"][0]["focal_px"] for one, own in zip(fitted, sizes) if own == size])
+    if len(focals) < 2:
+        return None
+    median = float(np.median(focals))
+    return {"size": size, "count": len(focals), "median_px": median, "min_px": float(focals.min()),
+            "max_px": float(focals.max()), "spread": float((focals.max() - focals.min()) / median)}
+
+
 def _name_every_unreadable(paths: list[Path], named: int = 8) -> None:
     """When more than one of the images ``paths`` names (files, or the images of folders, as ``load_any`` takes them)
     cannot be read, an ``InputError`` naming each (``named`` of them at most): reading stops at the first, and a user
@@ -156,6 +181,12 @@ def run(args: argparse.Namespace) -> int:
                 focal = f", focal {one['views'][0]['focal_px']:.0f} px" if one["views"] else ""
                 print(f"  {Path(one['path']).name}: registered {one.get('registered', '?')}, residual "
                       f"{one.get('residual_px', '?')} px{focal}{warnings}")
+            shared = shared_focal(described)
+            if shared is not None:
+                median, low, high = shared["median_px"], shared["min_px"], shared["max_px"]
+                print(f"focal fitted by {shared['count']} of them ({shared['size']}, three views or more, all "
+                      f"registered): median {median:.0f} px, {low:.0f}-{high:.0f} px (spread {100 * shared['spread']:.0f} "
+                      f"%); photos of one camera fuse alike with --focal-px {median:.0f}")
         return 0
     if len(paths) == 1 and is_capture_folder(paths[0]):
         capture = read_capture(paths[0])
