@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -118,11 +119,11 @@ def shared_focal(described: list[dict]) -> dict | None:
     fitted = [one for one in described
               if one.get("focal_held_by_photos") is True and len(one["views"]) >= 3
               and all(view["registered"] for view in one["views"])]
-    # the photo's size, long side first: a camera stored portrait has the same focal in pixels
-    sizes = ["x".join(sorted(one["views"][0]["size"].split("x"), key=int, reverse=True)) for one in fitted]
     if len(fitted) < 2:
         return None
-    size = max(set(sizes), key=sizes.count)
+    # the photo's size, long side first: a camera stored portrait has the same focal in pixels
+    sizes = ["x".join(sorted(one["views"][0]["size"].split("x"), key=int, reverse=True)) for one in fitted]
+    size = Counter(sizes).most_common(1)[0][0]  # a tie goes to the size met first, the same on every run
     focals = np.array([one["views"][0]["focal_px"] for one, own in zip(fitted, sizes) if own == size])
     if len(focals) < 2:
         return None
