@@ -32,7 +32,7 @@ from .align.correspond.texture import measure_ridge_period
 from .errors import InputError
 from .scene import View, scaled_size
 
-__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views", "resized_mask",
+__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views", "resized_image", "resized_mask",
            "map_on_grid"]
 
 RIDGE_PX = 16.0
@@ -61,7 +61,7 @@ MASK_SIDE_MAX = 2560
 survey's, at ~1 s); above it, the survey's mask is resized."""
 
 
-def _resized(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def resized_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``image`` at ``size`` = (width, height): area averaging down, bilinear up."""
     if (image.shape[1], image.shape[0]) == tuple(size):
         return image
@@ -73,7 +73,7 @@ def resized_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """A bool mask at ``size`` = (width, height): its coverage resampled and cut at one half (smooth edges both ways)."""
     if (mask.shape[1], mask.shape[0]) == tuple(size):
         return np.asarray(mask, bool)
-    return _resized(np.asarray(mask, np.float32), size) > 0.5
+    return resized_image(np.asarray(mask, np.float32), size) > 0.5
 
 
 @dataclass(frozen=True)
@@ -127,7 +127,7 @@ def _survey(view: View) -> _Survey:
 
     factor = min(1.0, SURVEY_SIDE / max(view.width, view.height))
     size = scaled_size((view.width, view.height), factor)
-    image = _resized(view.image, size)
+    image = resized_image(view.image, size)
     if view.mask is not None:
         return _Survey(factor, image, resized_mask(view.mask, size))
     return _Survey(factor, image, finger_mask(image, name=f"view {view.name!r}"))
@@ -196,7 +196,7 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
     for view, survey in zip(views, surveys):
         size = scale.size((view.width, view.height))
         same = size == (survey.image.shape[1], survey.image.shape[0])  # the survey copy is the working one
-        image = survey.image if same else _resized(view.image, size)
+        image = survey.image if same else resized_image(view.image, size)
         if view.mask is not None:
             mask = resized_mask(view.mask, size)
         elif scale.factor > survey.factor and max(size) <= MASK_SIDE_MAX:
@@ -221,8 +221,8 @@ def map_on_grid(values: np.ndarray, size: tuple[int, int], mask: np.ndarray | No
         out = values.copy()
     else:
         finite = np.isfinite(values)
-        weight = _resized(finite.astype(np.float32), size)
-        total = _resized(np.where(finite, values, 0.0).astype(np.float32), size)
+        weight = resized_image(finite.astype(np.float32), size)
+        total = resized_image(np.where(finite, values, 0.0).astype(np.float32), size)
         with np.errstate(invalid="ignore", divide="ignore"):
             out = np.where(weight > 1e-3, total / weight, np.nan).astype(np.float32)
     if mask is not None:

@@ -10,7 +10,7 @@ from fingersplat3d.scene import Camera, View, look_at
 from fingersplat3d.splat import Gaussians, rgb_to_sh
 from fingersplat3d.splat.adam import Adam
 from fingersplat3d.splat.config import PRESETS, SplatConfig, differences_from_preset, preset
-from fingersplat3d.splat.fit import fit_camera, fit_gaussians, gaussian_budget, render_camera
+from fingersplat3d.splat.fit import MIN_COARSE_PERIOD_PX, fit_camera, fit_gaussians, gaussian_budget, halved, render_camera
 from fingersplat3d.splat.strategy import GAUSSIAN_GROUPS, GradientStats, densify_and_prune, gaussians_of
 
 
@@ -61,11 +61,11 @@ def _plane_scene(n_side=14, channels=1):
                      torch.full((n,), 2.0), rgb_to_sh(colours))
 
 
-def _cameras(angles=(-20.0, 20.0), size=(64, 48)):
+def _cameras(angles=(-20.0, 20.0), size=(64, 48), focal=90.0):
     cameras = []
     for angle in angles:
         eye = 10.0 * np.array([np.sin(np.radians(angle)), 0.0, -np.cos(np.radians(angle))])
-        cameras.append(Camera.from_focal(90.0, size[0], size[1], look_at(eye, [0, 0, 0], [0, -1, 0])))
+        cameras.append(Camera.from_focal(focal, size[0], size[1], look_at(eye, [0, 0, 0], [0, -1, 0])))
     return cameras
 
 
@@ -93,6 +93,53 @@ def test_fit_recovers_a_known_scene_from_a_perturbed_start():
     assert np.mean(fit.losses[-10:]) < 0.35 * np.mean(fit.losses[:3])
     colour_error = lambda g: float((g.colors - truth.colors).abs().mean())  # noqa: E731
     assert colour_error(fit.gaussians) < 0.5 * colour_error(start)
+
+
+@pytest.mark.parametrize("size", [(64, 48), (65, 49)])
+def test_halved_view_keeps_the_camera_the_texture_and_the_mask(size):
+    truth = _plane_scene()
+    camera = _cameras(size=size)[0]
+    view = _views(truth, [camera])[0]
+    depth = np.where(view.mask, 10.0, np.nan).astype(np.float32)
+    small, small_camera, small_depth = halved(view, camera, depth)
+    assert (small.width, small.height) == (size[0] // 2, size[1] // 2) == small_camera.size
+    points = np.array([[0.3, -0.2, 0.0], [-0.5, 0.4, 0.1]])
+    (full_uv, _), (half_uv, _) = camera.project(points), small_camera.project(points)
+    # pixel centres at integer coordinates: half pixel x covers full pixels 2x and 2x + 1
+    np.testing.assert_allclose(half_uv, (full_uv + 0.5) * np.array(small_camera.size) / np.array(camera.size) - 0.5,
+                               atol=1e-9)
+    assert abs(small.image[small.mask].mean() - view.image[view.mask].mean()) < 0.02
+    assert abs(small.mask.mean() - view.mask.mean()) < 0.05
+    assert np.isfinite(small_depth[small.mask]).all() and np.isnan(small_depth[~small.mask]).all()
+    assert halved(View("nomask", view.image), camera)[0].mask is None
+
+
+def test_coarse_start_fits_as_well_as_full_resolution_steps():
+    truth = _plane_scene()
+    cameras = _cameras(size=(96, 72), focal=300.0)  # the stripes ~20 px apart: 10 px at half resolution
+    views = _views(truth, cameras)
+    generator = torch.Generator().manual_seed(1)
+    start = truth.with_(sh_dc=truth.sh_dc + 0.8 * torch.randn(truth.sh_dc.shape, generator=generator))
+    base = SplatConfig(iterations=60, refine_poses=False, densify_from=1000, lr_colors=0.1, min_gaussians=1)
+    error = lambda g: float((g.colors - truth.colors).abs().mean())  # noqa: E731
+    full = fit_gaussians(start, views, cameras, base, device="cpu")
+    coarse = fit_gaussians(start, views, cameras, replace(base, coarse_fraction=0.5), device="cpu")
+    assert len(coarse.losses) == 60 and all(math.isfinite(x) for x in coarse.losses)
+    assert full.coarse_steps == 0 and coarse.coarse_steps == 30
+    assert error(coarse.gaussians) < 0.5 * error(start)
+    assert error(coarse.gaussians) < 1.5 * error(full.gaussians) + 0.01
+    with pytest.raises(ValueError, match="coarse_fraction"):
+        SplatConfig(coarse_fraction=1.0)
+
+
+def test_ridges_too_fine_to_halve_keep_every_step_at_full_resolution():
+    truth = _plane_scene()
+    cameras = _cameras(size=(96, 72), focal=300.0)
+    views = _views(truth, cameras)
+    config = SplatConfig(iterations=6, refine_poses=False, densify_from=1000, min_gaussians=1, coarse_fraction=0.5)
+    fine = fit_gaussians(truth, views, cameras, config, device="cpu", periods=[MIN_COARSE_PERIOD_PX - 0.5] * 2)
+    coarse = fit_gaussians(truth, views, cameras, config, device="cpu", periods=[MIN_COARSE_PERIOD_PX, 20.0])
+    assert fine.coarse_steps == 0 and coarse.coarse_steps == 3
 
 
 def test_density_control_respects_budget_and_keeps_adam_state():

@@ -31,7 +31,8 @@ from .rasterize import RenderOutput, rasterize
 from .shading import facing_cosines, shade
 from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, param_group
 
-__all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget",
+__all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget", "halved",
+           "ridge_periods", "MIN_COARSE_PERIOD_PX",
            "scene_extent", "near_plane", "rotation_step_scale", "LONG_FOCAL"]
 
 LONG_FOCAL = 4.0
@@ -95,6 +96,22 @@ class SplatFit:
     initial_count: int
     budget: int
     seconds: float
+    coarse_steps: int = 0
+    """Steps at half resolution (``SplatConfig.coarse_fraction``; 0 where the ridges are too fine for it)."""
+
+
+MIN_COARSE_PERIOD_PX = 8.0
+"""The finest ridge period (photo pixels) at which the fit starts at half resolution (``SplatConfig.coarse_fraction``):
+halved, such ridges keep 4 px a period, twice the 2 px the half-size grid can hold at all; finer ones would alias in
+the half-size renders and be averaged away in the halved photos, so the fit then runs every step at full size."""
+
+
+def ridge_periods(views: Sequence[View]) -> list[float]:
+    """Each view's ridge period in pixels, measured inside its mask (the texture module's default where none shows)."""
+    from ..align.correspond.texture import estimate_ridge_period
+
+    return [estimate_ridge_period(view.image, view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool))
+            for view in views]
 
 
 def gaussian_budget(views: Sequence[View], config: SplatConfig, periods: Sequence[float] | None = None) -> int:
@@ -105,13 +122,11 @@ def gaussian_budget(views: Sequence[View], config: SplatConfig, periods: Sequenc
     by ``view_overlap`` (how many views see an average skin point). ``periods``: each view's ridge
     period in pixels when already measured (else measured here).
     """
-    from ..align.correspond.texture import estimate_ridge_period
-
+    periods = ridge_periods(views) if periods is None else periods
     cells = 0.0
-    for k, view in enumerate(views):
+    for view, period in zip(views, periods):
         mask = view.mask if view.mask is not None else np.ones(view.image.shape[:2], bool)
-        period = float(periods[k]) if periods is not None else estimate_ridge_period(view.image, mask)
-        cells += float(mask.sum()) / (period / 4.0) ** 2
+        cells += float(mask.sum()) / (float(period) / 4.0) ** 2
     budget = config.gaussians_per_cell * cells / max(config.view_overlap, 1.0)
     return int(np.clip(budget, config.min_gaussians, config.max_gaussians))
 
@@ -173,6 +188,17 @@ def _blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
     return planes[:, 0].permute(1, 2, 0)
 
 
+def halved(view: View, camera: Camera, depth: np.ndarray | None = None) -> tuple[View, Camera, np.ndarray | None]:
+    """``view``, ``camera`` and the prior ``depth`` at half the resolution (each side halved, rounded down, at least
+    one pixel): the image area averaged, the mask by its coverage, the depth over its finite pixels only."""
+    from ..working_scale import map_on_grid, resized_image, resized_mask
+
+    size = (max(1, view.width // 2), max(1, view.height // 2))
+    mask = resized_mask(view.mask, size) if view.mask is not None else None
+    small = View(view.name, resized_image(view.image, size), mask)
+    return small, camera.resized(size), None if depth is None else map_on_grid(depth, size, mask)
+
+
 def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: int, device) -> tuple:
     parameters = [torch.nn.Parameter(t.detach().clone().contiguous()) for t in model.tensors()]
     rates = [config.lr_means * extent, config.lr_quats, config.lr_scales, config.lr_opacity, config.lr_colors]
@@ -188,12 +214,15 @@ def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: in
 
 def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[Camera],
                   config: SplatConfig = SplatConfig(), *, budget: int | None = None, device: torch.device | None = None,
-                  depths: Sequence[np.ndarray] | None = None, progress: bool = False) -> SplatFit:
+                  depths: Sequence[np.ndarray] | None = None, progress: bool = False,
+                  periods: Sequence[float] | None = None) -> SplatFit:
     """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger.
 
     ``depths``: optional ``[H, W]`` prior depth per view (the geometry stage's, NaN = none); with
     ``lambda_depth > 0`` the rendered depth is kept near it (relative L1 inside the mask). The renders are shaded
-    with ``initial.facing_exponent``, which the fitted model keeps.
+    with ``initial.facing_exponent``, which the fitted model keeps. ``periods``: each view's ridge period in pixels
+    when already measured (else measured here when ``config.coarse_fraction`` asks for a half-resolution start, which
+    runs only with every period at least :data:`MIN_COARSE_PERIOD_PX`).
     """
     from tqdm import tqdm
 
@@ -204,9 +233,18 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
     model = initial.detach().to(device, torch.float32)
     priors = depths if depths is not None and config.lambda_depth > 0 else [None] * len(views)
     targets = [FitTarget.from_view(view, camera, device, prior) for view, camera, prior in zip(views, cameras, priors)]
+    coarse_steps = int(config.iterations * config.coarse_fraction)
+    if periods is None and (coarse_steps > 0 or budget is None):
+        periods = ridge_periods(views)
+    if coarse_steps > 0 and min(periods) < MIN_COARSE_PERIOD_PX:
+        coarse_steps = 0
+    coarse = targets
+    if coarse_steps > 0:
+        coarse = [FitTarget.from_view(small, small_camera, device, small_depth)
+                  for small, small_camera, small_depth in (halved(*args) for args in zip(views, cameras, priors))]
     if model.channels != targets[0].image.shape[-1]:
         raise ValueError(f"the model has {model.channels} colour channel(s) but the images have {targets[0].image.shape[-1]}")
-    budget = gaussian_budget(views, config) if budget is None else int(budget)
+    budget = gaussian_budget(views, config, periods) if budget is None else int(budget)
     extent = scene_extent(model.means)
     nears = [near_plane(model.means, camera, config.near_fraction) for camera in cameras]
     optimizer, rotation, translation = _optimizer(model, config, extent, len(views), device)
@@ -224,7 +262,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         if not order:
             order = list(order_rng.permutation(len(views)))
         v = order.pop()
-        target = targets[v]
+        target = (coarse if step < coarse_steps else targets)[v]
         current = gaussians_of(optimizer).with_(facing_exponent=model.facing_exponent)
         pose = target.world_to_cam
         if config.refine_poses and v != 0:
@@ -257,7 +295,8 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
                 pose = apply_pose_correction(targets[v].world_to_cam.double(), rotation[v].double() * turn_scales[v],
                                              translation[v].double())
                 refined[v] = Camera(cameras[v].K, pose.cpu().numpy(), cameras[v].width, cameras[v].height)
-    return SplatFit(fitted, refined, losses, densify_records, len(initial), budget, time.perf_counter() - started)
+    return SplatFit(fitted, refined, losses, densify_records, len(initial), budget, time.perf_counter() - started,
+                    coarse_steps)
 
 
 def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np.ndarray, *, iterations: int = 80,

@@ -17,7 +17,7 @@ from ..device import resolve_device
 from ..eval.poses import rotation_angle_deg
 from ..scene import Camera, View
 from .config import SplatConfig, differences_from_preset
-from .fit import fit_gaussians, gaussian_budget, near_plane, render_camera
+from .fit import fit_gaussians, gaussian_budget, near_plane, render_camera, ridge_periods
 from .gaussians import Gaussians
 
 __all__ = ["SplatStage", "run_splat_stage"]
@@ -55,12 +55,13 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     clean_config = CleanConfig() if clean_config is None else clean_config
     train_views = [views[v] for v in fitted_views]
     train_cameras = [cameras[v] for v in fitted_views]
-    budget = gaussian_budget(train_views, config, None if periods is None else [periods[v] for v in fitted_views])
+    train_periods = ridge_periods(train_views) if periods is None else [periods[v] for v in fitted_views]
+    budget = gaussian_budget(train_views, config, train_periods)
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
     train_depths = [depths[v] for v in fitted_views] if depths is not None else None
     shading = _shading(train_views, train_cameras, train_depths, config)
     fit = fit_gaussians(initial.with_(facing_exponent=shading.exponent), train_views, train_cameras, config,
-                        budget=budget, device=device, depths=train_depths, progress=progress)
+                        budget=budget, device=device, depths=train_depths, progress=progress, periods=train_periods)
     masks = [view.mask for view in train_views]
     model = fit.gaussians
     outside_before = _alpha_outside(model, fit.cameras, masks, config)
@@ -70,7 +71,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     polish_seconds = 0.0
     if config.polish_iterations > 0 and len(cleaned):
         steps = config.polish_iterations
-        polish = replace(config, iterations=steps, polish_fraction=0.0, refine_poses=False, densify_from=steps + 1,
+        polish = replace(config, iterations=steps, polish_fraction=0.0, coarse_fraction=0.0, refine_poses=False,
+                         densify_from=steps + 1,
                          lr_means=0.1 * config.lr_means, lr_means_final=0.1 * config.lr_means_final, seed=config.seed + 1)
         polished = fit_gaussians(cleaned, train_views, fit.cameras, polish, budget=len(cleaned), device=device,
                                  depths=train_depths)
@@ -91,7 +93,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     report = {"preset": config.preset or None, "differs_from_preset": differences_from_preset(config),
               "config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
-              "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "clean_seconds": round(clean_seconds, 2),
+              "gaussians": len(cleaned), "fit_seconds": round(fit.seconds, 2), "half_resolution_steps": fit.coarse_steps,
+              "clean_seconds": round(clean_seconds, 2),
               "polish_seconds": round(polish_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
               "shading": {"facing_exponent": round(shading.exponent, 4), "points": shading.points,
