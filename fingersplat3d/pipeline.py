@@ -25,10 +25,11 @@ from .align.solve.rig import Rig, RigCapture
 from .align.transfer import MIN_PARALLAX_DEG, backed_shares, multi_view_backing
 from .device import resolve_device
 from .errors import InputError
+from .sampling import map_on_grid
 from .scene import Camera, Capture, View
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
-from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, map_on_grid, working_views
+from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, working_views
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX",
            "refuse_focal_with_rig"]

@@ -30,10 +30,10 @@ import numpy as np
 
 from .align.correspond.texture import measure_ridge_period
 from .errors import InputError
+from .sampling import map_on_grid, resized_image, resized_mask
 from .scene import View, scaled_size
 
-__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views", "resized_image", "resized_mask",
-           "map_on_grid"]
+__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
 
 RIDGE_PX = 16.0
 """Default working pixels per ridge period: the sampling of the real captures the project's accuracy was measured
@@ -59,21 +59,6 @@ MIN_SIDE = 256
 MASK_SIDE_MAX = 2560
 """Above the survey size and up to this long side, the working copy gets its own mask (sharper edges than the
 survey's, at ~1 s); above it, the survey's mask is resized."""
-
-
-def resized_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``image`` at ``size`` = (width, height): area averaging down, bilinear up."""
-    if (image.shape[1], image.shape[0]) == tuple(size):
-        return image
-    shrink = size[0] < image.shape[1]
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-
-
-def resized_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """A bool mask at ``size`` = (width, height): its coverage resampled and cut at one half (smooth edges both ways)."""
-    if (mask.shape[1], mask.shape[0]) == tuple(size):
-        return np.asarray(mask, bool)
-    return resized_image(np.asarray(mask, np.float32), size) > 0.5
 
 
 @dataclass(frozen=True)
@@ -210,21 +195,3 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
         photo.append(view.with_(mask=photo_mask))
         working.append(photo[-1] if scale.factor == 1.0 else View(view.name, image, mask))
     return photo, working, scale
-
-
-def map_on_grid(values: np.ndarray, size: tuple[int, int], mask: np.ndarray | None = None) -> np.ndarray:
-    """A per-pixel map (NaN where it has no value) resampled to ``size``; NaN outside ``mask`` and where no finite
-    value is near. Values are averaged over finite neighbours only, so no NaN bleeds into the finger and no
-    background into its rim."""
-    values = np.asarray(values, np.float32)
-    if (values.shape[1], values.shape[0]) == tuple(size):
-        out = values.copy()
-    else:
-        finite = np.isfinite(values)
-        weight = resized_image(finite.astype(np.float32), size)
-        total = resized_image(np.where(finite, values, 0.0).astype(np.float32), size)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = np.where(weight > 1e-3, total / weight, np.nan).astype(np.float32)
-    if mask is not None:
-        out[~np.asarray(mask, bool)] = np.nan
-    return out

@@ -10,7 +10,8 @@ from fingersplat3d.eval import depth_errors, relative_rotation_errors
 from fingersplat3d.pipeline import FuseConfig, fuse
 from fingersplat3d.scene import Camera, Capture, View, look_at
 from fingersplat3d.synth import SynthConfig, synthesize
-from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, map_on_grid, resized_mask, working_views
+from fingersplat3d.sampling import map_on_grid, resized_mask
+from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, working_views
 
 
 @pytest.fixture(scope="module")

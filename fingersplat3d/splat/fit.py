@@ -191,7 +191,7 @@ def _blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
 def halved(view: View, camera: Camera, depth: np.ndarray | None = None) -> tuple[View, Camera, np.ndarray | None]:
     """``view``, ``camera`` and the prior ``depth`` at half the resolution (each side halved, rounded down, at least
     one pixel): the image area averaged, the mask by its coverage, the depth over its finite pixels only."""
-    from ..working_scale import map_on_grid, resized_image, resized_mask
+    from ..sampling import map_on_grid, resized_image, resized_mask
 
     size = (max(1, view.width // 2), max(1, view.height // 2))
     mask = resized_mask(view.mask, size) if view.mask is not None else None
