@@ -30,7 +30,7 @@ import numpy as np
 
 from .align.correspond.texture import measure_ridge_period
 from .errors import InputError
-from .sampling import map_on_grid, resized_image, resized_mask
+from .sampling import resized_image, resized_mask
 from .scene import View, scaled_size
 
 __all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
