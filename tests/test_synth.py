@@ -188,6 +188,57 @@ def test_finger_shape_within_human_ranges():
         assert _closed_and_consistently_oriented(surface.triangles)
 
 
+def test_the_default_pad_is_a_half_ellipse_and_wide_shapes_leave_it():
+    from dataclasses import replace
+
+    from fingersplat3d.synth.shape import FingerParams, _section, random_finger_params
+
+    # The adult draw is the one it always was (every shipped sample and table rests on it); its pad is a half ellipse.
+    adult = random_finger_params(np.random.default_rng(4))
+    assert adult.pad_exponent == 2.0
+    phi = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    y, z = _section(phi, adult).T
+    np.testing.assert_allclose((2 * y) ** 2 + (z / (adult.height_ratio * adult.pad_share)) ** 2, 1.0, atol=1e-12)
+    # A super-ellipse pad: |2y|^p + |z / depth|^p = 1, fuller than the ellipse at 45 degrees for p > 2.
+    boxy = replace(FingerParams(), pad_exponent=3.5)
+    y, z = _section(phi, boxy).T
+    depth = boxy.height_ratio * boxy.pad_share
+    np.testing.assert_allclose(np.abs(2 * y) ** 3.5 + np.abs(z / depth) ** 3.5, 1.0, atol=1e-9)
+    assert abs(_section(np.array([np.pi / 4]), boxy)[0, 1]) > abs(_section(np.array([np.pi / 4]), FingerParams())[0, 1])
+    # The wide draw starts from the adult one and goes beyond its ranges, deterministically.
+    rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
+    wide = [random_finger_params(rng_a, "wide") for _ in range(40)]
+    assert wide[0].width == adult.width and wide[0].cap == adult.cap
+    assert [w.pad_exponent for w in wide] == [random_finger_params(rng_b, "wide").pad_exponent for _ in range(40)]
+    exponents, heights, tapers = (np.array([getattr(w, k) for w in wide]) for k in ("pad_exponent", "height_ratio", "taper"))
+    assert 1.6 <= exponents.min() and exponents.max() <= 3.5 and exponents.min() < 2.0 < exponents.max()
+    assert heights.max() > 0.95 and heights.min() < 0.68 and tapers.min() < 0.0 < tapers.max()
+    with pytest.raises(ValueError, match="shapes"):
+        random_finger_params(np.random.default_rng(0), "alien")
+
+
+@pytest.mark.parametrize("pad_exponent, height_ratio, taper, bend", [(1.6, 0.55, -0.25, 6.0), (3.5, 1.05, 0.35, 0.0)])
+def test_wide_shapes_at_their_extremes_make_closed_fingers_and_finite_captures(pad_exponent, height_ratio, taper, bend):
+    from dataclasses import replace
+
+    from fingersplat3d.synth.shape import FingerParams, make_finger_surface
+
+    params = replace(FingerParams(), pad_exponent=pad_exponent, height_ratio=height_ratio, taper=taper, bend=bend,
+                     pad_bulge=0.35)
+    surface = make_finger_surface(params, 40, 20, 60)
+    assert np.all(np.isfinite(surface.vertices)) and _closed_and_consistently_oriented(surface.triangles)
+    body = surface.grid[surface.grid.shape[0] // 2]
+    assert np.ptp(body[:, 2]) < 1.5 * np.ptp(body[:, 1])
+
+
+def test_wide_shapes_capture():
+    capture = synthesize(2, SynthConfig(size=(160, 128), shapes="wide")).capture
+    adult = synthesize(2, SynthConfig(size=(160, 128))).capture
+    for view, other in zip(capture.views, adult.views):
+        assert np.all(np.isfinite(view.image)) and view.mask.any()
+        assert not np.array_equal(view.mask, other.mask)
+
+
 def _closed_and_consistently_oriented(triangles):
     """Every directed edge appears once and its reverse once: closed, manifold, coherent winding."""
     edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
@@ -212,6 +263,7 @@ def test_skin_coordinates_are_arc_lengths():
 
 @pytest.mark.parametrize("config, words", [
     (SynthConfig(rig="nope"), "unknown rig"),
+    (SynthConfig(shapes="alien"), "unknown finger shapes"),
     (SynthConfig(pattern="spiral"), "unknown pattern"),
     (SynthConfig(size=(4, 4)), "image size"),
     (SynthConfig(focal=-3.0), "focal"),

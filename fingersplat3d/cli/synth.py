@@ -38,6 +38,9 @@ def add(commands) -> None:
                             "close-up like a phone's, 400: nearly orthographic)")
     synth.add_argument("--angles", type=angles, help="ring rig: camera angles in degrees around the finger axis, written with = when the first is negative: --angles=-60,-20,20,60")
     synth.add_argument("--poses", type=COUNT, default=10, help="cfpose rig: number of shots (default 10)")
+    synth.add_argument("--shapes", default="adult", choices=("adult", "wide"),
+                       help="finger shapes: adult (human ranges, the pad a half ellipse) or wide (beyond them: pads "
+                            "flatter or more pointed than an ellipse, deeper or flatter sections, stronger bends and tapers)")
     synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
     colour = synth.add_mutually_exclusive_group()
     colour.add_argument("--rgb", dest="gray", action="store_false", default=None, help="colour images")
@@ -61,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     if args.specular is not None:
         appearance = replace(appearance, specular=args.specular)
     config = SynthConfig(rig=args.rig, size=args.size, focal=args.focal, angles=args.angles, poses=args.poses,
-                         pattern=args.pattern, appearance=appearance, gray=args.gray, distance_mm=args.distance_mm)
+                         pattern=args.pattern, appearance=appearance, gray=args.gray, distance_mm=args.distance_mm,
+                         shapes=args.shapes)
     seeds = range(args.seed, args.seed + args.count)
     targets = [args.output] if args.count == 1 else [args.output / f"{args.rig}_{seed:05d}" for seed in seeds]
     for target in targets:

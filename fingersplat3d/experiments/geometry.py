@@ -40,15 +40,18 @@ class GeometryCase:
     size: tuple[int, int] = (640, 512)
     distance_mm: float = CAMERA_DISTANCE_MM
     """Camera to finger (the framing kept): short for a wide-angle close-up, long for a nearly orthographic camera."""
+    shapes: str = "adult"
+    """``fs3d synth``'s finger shapes: ``wide`` for pads and sections the ``prior`` does not share."""
 
     @property
     def label(self) -> str:
         far = "" if self.distance_mm == CAMERA_DISTANCE_MM else f" at {self.distance_mm:g} mm"
-        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}"
+        wide = "" if self.shapes == "adult" else f", {self.shapes} shapes"
+        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}{wide}"
 
     @property
     def synth_key(self) -> tuple:
-        return (self.rig, self.size, self.distance_mm)
+        return (self.rig, self.size, self.distance_mm, self.shapes)
 
 
 CASES = {
@@ -57,6 +60,7 @@ CASES = {
     "cfpose2": GeometryCase("cfpose", 2, (512, 640)), "cfpose3": GeometryCase("cfpose", 3, (512, 640)),
     "cfpose5": GeometryCase("cfpose", 5, (512, 640)), "cfpose10": GeometryCase("cfpose", 10, (512, 640)),
     "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
+    "uwa3-wide": GeometryCase("uwa", 3, shapes="wide"), "ring5-wide": GeometryCase("ring", 5, shapes="wide"),
     "uwa3-close": GeometryCase("uwa", 3, distance_mm=50.0), "uwa3-far": GeometryCase("uwa", 3, distance_mm=400.0),
 }
 
@@ -94,7 +98,7 @@ def score_geometry(result, truth: dict) -> dict:
 
 
 def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str,
-                   distance_mm: float = CAMERA_DISTANCE_MM) -> list[Path]:
+                   distance_mm: float = CAMERA_DISTANCE_MM, shapes: str = "adult") -> list[Path]:
     """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`), pickled into
     ``folder`` for measurements that run in other processes."""
     import pickle
@@ -104,8 +108,8 @@ def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: s
     options = {"angles": RING_ANGLES} if rig == "ring" else {}
     paths = []
     for seed in seeds:
-        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{seed}.pkl"
-        config = SynthConfig(rig=rig, size=size, distance_mm=distance_mm, **options)
+        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{shapes}-{seed}.pkl"
+        config = SynthConfig(rig=rig, size=size, distance_mm=distance_mm, shapes=shapes, **options)
         path.write_bytes(pickle.dumps(synthesize(seed, config).capture))
         paths.append(path)
     return paths
@@ -150,8 +154,8 @@ def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progr
     config = config or FuseConfig(splat=None)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        paths = {(rig, size, far): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far)]
-                 for rig, size, far in dict.fromkeys(case.synth_key for case in cases)}
+        paths = {(rig, size, far, shapes): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far, shapes)]
+                 for rig, size, far, shapes in dict.fromkeys(case.synth_key for case in cases)}
         for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
             rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
     return rows

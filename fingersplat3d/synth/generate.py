@@ -12,7 +12,7 @@ from .render import Appearance, FingerScene, Rendering, skin_weight
 from .ridges import BIFURCATION, PATTERN_CLASSES, RidgePattern, make_ridge_pattern
 from .rolled import ROLLED_PRINT_FILE, RolledPrint, true_rolled_print
 from .rigs import CAMERA_DISTANCE_MM, DEFAULT_SIZES, RIGS, RigView, cfpose_rig, ring_rig, uwa_rig
-from .shape import FingerSurface, make_finger_surface, random_finger_params
+from .shape import SHAPES, FingerSurface, make_finger_surface, random_finger_params
 
 __all__ = ["SynthConfig", "SynthResult", "synthesize", "minutiae_ground_truth"]
 
@@ -48,6 +48,9 @@ class SynthConfig:
     """Force grayscale (True) or RGB (False); default: uwa/ring gray, cfpose RGB."""
     finger_pose: bool = True
     """uwa rig: lay the finger in the rig as a hand does (random roll, pitch, yaw and shift), not on its axis."""
+    shapes: str = "adult"
+    """Finger shapes drawn: ``adult`` (human ranges, the pad a half ellipse) or ``wide`` (beyond them, the pad's
+    section not the ``prior`` pointmap's own: :func:`~fingersplat3d.synth.shape.random_finger_params`)."""
     mesh_detail: float = 1.0
     """Scale of the surface grid (1.0: 180+80 rows x 240 columns, ~62k vertices). The depth maps are
     exact for whatever mesh is used, and that mesh is the one exported; smaller ships smaller files."""
@@ -68,6 +71,8 @@ class SynthResult:
 def _validate(config: SynthConfig) -> None:
     if config.rig not in RIGS:
         raise InputError(f"unknown rig {config.rig!r}; choose one of {', '.join(RIGS)}")
+    if config.shapes not in SHAPES:
+        raise InputError(f"unknown finger shapes {config.shapes!r}; choose one of {', '.join(SHAPES)}")
     if config.pattern != "random" and config.pattern not in PATTERN_CLASSES:
         raise InputError(f"unknown pattern {config.pattern!r}; choose random or one of {', '.join(PATTERN_CLASSES)}")
     if config.size is not None and (len(config.size) != 2 or min(config.size) < 8 or max(config.size) > 16384):
@@ -93,7 +98,7 @@ def synthesize(seed: int, config: SynthConfig = SynthConfig()) -> SynthResult:
     seconds: dict[str, float] = {}
     clock = time.perf_counter()
     rng = np.random.default_rng(seed)
-    params = random_finger_params(rng)
+    params = random_finger_params(rng, config.shapes)
     pattern_class = config.pattern if config.pattern != "random" else str(rng.choice(PATTERN_CLASSES, p=[0.1, 0.6, 0.3]))
     period = float(rng.uniform(*config.period_mm))
     detail = config.mesh_detail

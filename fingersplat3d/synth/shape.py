@@ -4,8 +4,8 @@ Finger frame: the finger axis is +x (base at ``x = tip_x - length``, tip pole at
 the pad (palmar side) faces -z and the nail side +z; y completes a right-handed frame.
 
 The surface is a grid over (axial station i, azimuth j): ``phi = 0`` points at the pad centre,
-``phi = pi`` at the nail. The cross-section is not a circle: an ellipse on the pad half, a flatter
-super-ellipse on the nail half, wider than high. Along the axis the section tapers, the axis bends
+``phi = pi`` at the nail. The cross-section is not a circle: an ellipse on the pad half (a super-ellipse with the
+``wide`` shapes), a flatter super-ellipse on the nail half, wider than high. Along the axis the section tapers, the axis bends
 slightly toward the palm, and the last ``cap`` millimetres close as an ellipsoidal cap.
 
 Skin "pattern coordinates" ``(a, b)`` in mm let a flat ridge pattern be laid on the surface:
@@ -15,7 +15,7 @@ map is near-isometric on the body of the finger and shears on the tip cap.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -35,6 +35,9 @@ class FingerParams:
     """Share of the section height on the pad side of the axis (the pad is fuller than the nail side)."""
     nail_flatness: float = 3.2
     """Super-ellipse exponent of the nail half (2 = ellipse, larger = flatter, boxier)."""
+    pad_exponent: float = 2.0
+    """Super-ellipse exponent of the pad half: 2 is a half ellipse, the ``prior`` pointmap's own section; larger
+    makes a flatter pad with fuller sides, smaller a more pointed one (drawn only by the ``wide`` shapes)."""
     length: float = 44.0
     """Modelled length from the tip pole back toward the hand (beyond the distal crease)."""
     cap: float = 9.0
@@ -52,9 +55,28 @@ class FingerParams:
     """World x of the tip pole."""
 
 
-def random_finger_params(rng: np.random.Generator) -> FingerParams:
+SHAPES = ("adult", "wide")
+"""Families :func:`random_finger_params` draws from."""
+
+
+def random_finger_params(rng: np.random.Generator, shapes: str = "adult") -> FingerParams:
     """Random adult finger, drawn wide across human ranges (thumbs to little fingers, slim to
-    bulbous): the reconstruction must not depend on one shape."""
+    bulbous): the reconstruction must not depend on one shape.
+
+    ``shapes="wide"`` draws the same and then, from the same stream, a pad that is not the half ellipse the ``prior``
+    pointmap assumes (super-ellipse exponent 1.6-3.5), sections 0.55-1.05 as high as wide, bends up to 6 mm, a taper
+    from -0.25 (widening toward the tip) to 0.35 and a fuller pad bulge: what another generator's or another
+    group's fingers may be, measured by ``tools/bench_fuse.py --cases uwa3-wide``."""
+    if shapes not in SHAPES:
+        raise ValueError(f"unknown finger shapes {shapes!r}; choose one of {', '.join(SHAPES)}")
+    params = _adult_params(rng)
+    if shapes == "wide":
+        params = replace(params, pad_exponent=rng.uniform(1.6, 3.5), height_ratio=rng.uniform(0.55, 1.05),
+                         bend=rng.uniform(0.0, 6.0), taper=rng.uniform(-0.25, 0.35), pad_bulge=rng.uniform(0.0, 0.35))
+    return params
+
+
+def _adult_params(rng: np.random.Generator) -> FingerParams:
     width = rng.uniform(13.0, 22.0)
     return FingerParams(
         width=width,
@@ -159,8 +181,8 @@ def _section(phi: np.ndarray, params: FingerParams) -> np.ndarray:
     """Unit-width cross-section ``[..., 2]`` (y, z) at azimuth ``phi`` (0 = pad centre, -z)."""
     sin, cos = np.sin(phi), np.cos(phi)
     half_height = params.height_ratio
-    y = 0.5 * np.sign(sin) * np.abs(sin) ** np.where(cos >= 0, 1.0, 2.0 / params.nail_flatness)
-    pad = -half_height * params.pad_share * cos
+    y = 0.5 * np.sign(sin) * np.abs(sin) ** np.where(cos >= 0, 2.0 / params.pad_exponent, 2.0 / params.nail_flatness)
+    pad = -half_height * params.pad_share * np.sign(cos) * np.abs(cos) ** (2.0 / params.pad_exponent)
     nail = half_height * (1 - params.pad_share) * np.abs(cos) ** (2.0 / params.nail_flatness)
     z = np.where(cos >= 0, pad, nail)
     return np.stack([y, z], axis=-1)
