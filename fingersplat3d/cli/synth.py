@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..atomic import check_free
 from ..synth.rigs import CAMERA_DISTANCE_MM
+from ..synth.shape import SHAPES
 from .types import COUNT, POSITIVE, SEED, angles, number, size
 
 DISTANCE = number(float, 30.0, 2000.0)
@@ -38,7 +39,7 @@ def add(commands) -> None:
                             "close-up like a phone's, 400: nearly orthographic)")
     synth.add_argument("--angles", type=angles, help="ring rig: camera angles in degrees around the finger axis, written with = when the first is negative: --angles=-60,-20,20,60")
     synth.add_argument("--poses", type=COUNT, default=10, help="cfpose rig: number of shots (default 10)")
-    synth.add_argument("--shapes", default="adult", choices=("adult", "wide"),
+    synth.add_argument("--shapes", default="adult", choices=SHAPES,
                        help="finger shapes: adult (human ranges, the pad a half ellipse) or wide (beyond them: pads "
                             "flatter or more pointed than an ellipse, deeper or flatter sections, stronger bends and tapers)")
     synth.add_argument("--pattern", default="random", choices=("random", "arch", "loop", "whorl"), help="fingerprint class")
