@@ -35,6 +35,20 @@ def test_ring_and_uwa_views():
     assert pick_views(uwa, CASES["uwa2"]) == ("left", "center") and pick_views(uwa, CASES["uwa3"]) == tuple(uwa.names)
 
 
+def test_a_zoomed_case_frames_the_finger_larger(tmp_path):
+    """``GeometryCase.zoom``: the focal times the rig's default, named in the label and kept apart in the captures."""
+    import pickle
+
+    from fingersplat3d.experiments.geometry import synth_captures
+
+    zoomed = CASES["uwa3-zoom"]
+    assert zoomed.zoom == 1.6 and "zoomed 1.6x" in zoomed.label and zoomed.synth_key != CASES["uwa3"].synth_key
+    plain, = synth_captures([0], tmp_path, (160, 128), "uwa")
+    near, = synth_captures([0], tmp_path, (160, 128), "uwa", zoom=1.6)
+    focal = [pickle.loads(path.read_bytes()).views[0].camera.K[0, 0] for path in (plain, near)]
+    assert plain != near and focal[1] == pytest.approx(1.6 * focal[0])
+
+
 def test_geometry_table_gives_medians_and_worst_and_keeps_failed_cases():
     rows = [{"case": "ring 3 views 640x512", "status": "done", "registered_all": True, "rotation_error_deg": e,
              "rotation_max_deg": 2 * e, "depth_mae_mm": 0.1 * e, "depth_worst_view_mm": 0.2 * e, "wall_s": 5.0,

@@ -170,3 +170,59 @@ def test_the_widest_disc_is_the_fingers_width_whether_the_frame_cuts_it_or_not()
     assert abs(widest_disc(capsule(radius=50)) - 101) <= 3
     assert abs(widest_disc(short.T) - widest_disc(short)) <= 1e-9  # no preferred direction
     assert widest_disc(np.zeros((20, 20), bool)) == 0.0 and widest_disc(np.ones((20, 20), bool)) == 0.0
+
+
+def _pad_profile(u, radius, tip=60, length=440):
+    """Half-width along a horizontal finger whose tip is at column ``tip``: an elliptical cap one radius long, then a pad
+    bulging by a third in the middle of the body and narrowing again toward the base."""
+    body = np.clip((u - tip - radius) / (length - radius), 0.0, 1.0)
+    cap = np.sqrt(np.clip(1.0 - ((tip + radius - u) / radius) ** 2, 0.0, 1.0))
+    return np.where(u < tip + radius, radius * cap, radius * (1.0 + np.sin(np.pi * body) / 3.0))
+
+
+def _pad_view(radius, centre_row, rows=300, cols=440):
+    """A view of the bulging finger of :func:`_pad_profile` (cut by the right border), its axis on ``centre_row``."""
+    v, u = np.mgrid[:rows, :cols]
+    return (np.abs(v - centre_row) <= _pad_profile(u, radius)) & (u >= 60)
+
+
+def test_a_view_the_frame_cuts_along_its_side_takes_its_widths_from_the_others():
+    """A side view whose pad the bottom border cuts (its chords whole only at the tip's cap and near the base): its
+    chords, completed from their whole neighbours, come out up to 8 px narrow; the other views' widths at the same
+    distance from the tip, times the ratio where both are whole, give the pad's bulge back, and its relief with it."""
+    from fingersplat3d.segment.side_cut import capture_frames, side_cut_widths
+
+    front, whole_side, cut_side = _pad_view(60, 150), _pad_view(66, 150), _pad_view(66, 228)
+    assert cut_side[-1].sum() > 150 and not cut_side[-1, :120].any()  # the border cuts the pad, not the cap
+    masks = [front, whole_side, cut_side]
+    widths = side_cut_widths(masks)
+    assert widths[0] is None and widths[1] is None and widths[2] is not None
+    plain, completed = orient_frames(masks), capture_frames(masks)
+    for index in (0, 1):  # views the frame does not cut along their side are left as they were
+        assert np.array_equal(plain[index].sections.half_width, completed[index].sections.half_width)
+    assert [frame.widths_from_views for frame in completed] == [False, False, True]
+    u = np.arange(200, 380)  # the stretch the border cuts
+    truth = _pad_profile(u, 66)
+    pixels = np.stack([u, np.full(u.size, 228.0)], 1)
+
+    def error(frame):
+        s, _ = frame.coordinates(pixels)
+        return np.abs(frame.sections.at(s)[0] - truth).max()
+
+    assert error(plain[2]) > 6.0 and error(completed[2]) < 2.5
+    # The prior's relief, peaking at 0.95 of the half-width, follows.
+    peak = lambda height: height[:, 250:330].max(0).mean()  # noqa: E731
+    plain_peak, completed_peak = peak(finger_height(cut_side).height), peak(finger_height(cut_side, widths=widths[2]).height)
+    true_peak = 0.95 * _pad_profile(np.arange(250, 330), 66).mean()
+    assert abs(completed_peak - true_peak) < 0.03 * true_peak < abs(plain_peak - true_peak)
+
+
+def test_a_view_cut_along_its_whole_side_keeps_its_own_widths():
+    """With no whole chord off the tip's cap to take the ratio from, nothing stands in for a cut view's widths; a
+    capture of one view has no other to take them from; the chords of views cut only across their end stay theirs."""
+    from fingersplat3d.segment.side_cut import side_cut_widths
+
+    cut_everywhere = _pad_view(66, 150)[:150 + 40]  # the bottom border cuts it from the cap to the base
+    assert side_cut_widths([_pad_view(60, 150), cut_everywhere]) == [None, None]
+    assert side_cut_widths([_pad_view(66, 228)]) == [None]
+    assert side_cut_widths([capsule(), capsule(radius=55)]) == [None, None]

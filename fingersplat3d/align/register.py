@@ -42,7 +42,8 @@ import numpy as np
 
 from ..pointmaps.base import Pointmap
 from ..scene import View
-from ..segment.silhouette import TIP_BASES, capture_axes, orient_frames, silhouette_frame
+from ..segment.side_cut import capture_frames
+from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, silhouette_frame
 from .correspond.chart import CylinderChart
 from .correspond.chart_growth import grow_first_guess
 from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, chart_shift_candidates,
@@ -357,8 +358,9 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                for pair in pairs}
     # One tip end for the whole capture: on crops cut at both ends a view's own choice can disagree
     # with the others', and charts running opposite ways share no turn.
-    frames = orient_frames(prepared.masks)
-    tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]} for frame in frames]
+    frames = capture_frames(prepared.masks)
+    tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]} | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {})
+            for frame in frames]
     if config.matcher == "surface":
         charts = [CylinderChart.from_frame(frame) for frame in frames]
         step = max(1.0, prepared.period / 8.0)

@@ -42,16 +42,19 @@ class GeometryCase:
     """Camera to finger (the framing kept): short for a wide-angle close-up, long for a nearly orthographic camera."""
     shapes: str = "adult"
     """``fs3d synth``'s finger shapes: ``wide`` for pads and sections the ``prior`` does not share."""
+    zoom: float = 1.0
+    """The focal times the rig's default: at 1.6 the finger fills the frame, cut at both ends and along some sides."""
 
     @property
     def label(self) -> str:
         far = "" if self.distance_mm == CAMERA_DISTANCE_MM else f" at {self.distance_mm:g} mm"
         wide = "" if self.shapes == "adult" else f", {self.shapes} shapes"
-        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}{wide}"
+        zoom = "" if self.zoom == 1.0 else f", zoomed {self.zoom:g}x"
+        return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}{wide}{zoom}"
 
     @property
     def synth_key(self) -> tuple:
-        return (self.rig, self.size, self.distance_mm, self.shapes)
+        return (self.rig, self.size, self.distance_mm, self.shapes, self.zoom)
 
 
 CASES = {
@@ -62,6 +65,7 @@ CASES = {
     "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
     "uwa3-wide": GeometryCase("uwa", 3, shapes="wide"), "ring5-wide": GeometryCase("ring", 5, shapes="wide"),
     "uwa3-close": GeometryCase("uwa", 3, distance_mm=50.0), "uwa3-far": GeometryCase("uwa", 3, distance_mm=400.0),
+    "uwa3-zoom": GeometryCase("uwa", 3, zoom=1.6), "uwa3-wide-zoom": GeometryCase("uwa", 3, shapes="wide", zoom=1.2),
 }
 
 
@@ -98,17 +102,20 @@ def score_geometry(result, truth: dict) -> dict:
 
 
 def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str,
-                   distance_mm: float = CAMERA_DISTANCE_MM, shapes: str = "adult") -> list[Path]:
-    """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`), pickled into
-    ``folder`` for measurements that run in other processes."""
+                   distance_mm: float = CAMERA_DISTANCE_MM, shapes: str = "adult", zoom: float = 1.0) -> list[Path]:
+    """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`; the focal ``zoom`` times
+    the rig's default), pickled into ``folder`` for measurements that run in other processes."""
     import pickle
 
     from ..synth import SynthConfig, synthesize
+    from ..synth.rigs import default_focal
 
     options = {"angles": RING_ANGLES} if rig == "ring" else {}
+    if zoom != 1.0:
+        options["focal"] = zoom * default_focal(size, distance_mm)
     paths = []
     for seed in seeds:
-        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{shapes}-{seed}.pkl"
+        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{shapes}-{zoom:g}x-{seed}.pkl"
         config = SynthConfig(rig=rig, size=size, distance_mm=distance_mm, shapes=shapes, **options)
         path.write_bytes(pickle.dumps(synthesize(seed, config).capture))
         paths.append(path)
@@ -154,8 +161,8 @@ def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progr
     config = config or FuseConfig(splat=None)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        paths = {(rig, size, far, shapes): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far, shapes)]
-                 for rig, size, far, shapes in dict.fromkeys(case.synth_key for case in cases)}
+        paths = {(rig, size, far, shapes, zoom): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far, shapes, zoom)]
+                 for rig, size, far, shapes, zoom in dict.fromkeys(case.synth_key for case in cases)}
         for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
             rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
     return rows

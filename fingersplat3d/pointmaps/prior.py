@@ -41,7 +41,8 @@ import numpy as np
 from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
-from ..segment.silhouette import capture_axes, chord_sections, finger_axis
+from ..segment.side_cut import side_cut_widths
+from ..segment.silhouette import WidthReference, along_axis, capture_axes, chord_sections, finger_axis
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -110,10 +111,13 @@ class PriorBackend:
 
     def predict_views(self, views: Sequence[View]) -> list[Pointmap]:
         """One own-frame pointmap per view, on the view's pixel grid; outlines the frame does not cut take the axis
-        the views agree on (:func:`~fingersplat3d.segment.silhouette.capture_axes`)."""
+        the views agree on (:func:`~fingersplat3d.segment.silhouette.capture_axes`), and chords the frame cuts along a
+        view's side take their widths from the other views (:func:`~fingersplat3d.segment.silhouette.side_cut_widths`)."""
         masks = [self._mask(view) for view in views]
         hints = capture_axes(masks)
-        return [self._predict(index, view, mask, hint) for index, (view, mask, hint) in enumerate(zip(views, masks, hints))]
+        widths = side_cut_widths(masks, hints=hints)
+        return [self._predict(index, view, mask, hint, width)
+                for index, (view, mask, hint, width) in enumerate(zip(views, masks, hints, widths))]
 
     @staticmethod
     def _mask(view: View) -> np.ndarray:
@@ -123,7 +127,8 @@ class PriorBackend:
             raise InputError(f"view {view.name!r}: the mask is empty")
         return view.mask
 
-    def _predict(self, index: int, view: View, mask: np.ndarray, hint: np.ndarray | None) -> Pointmap:
+    def _predict(self, index: int, view: View, mask: np.ndarray, hint: np.ndarray | None,
+                 widths: WidthReference | None = None) -> Pointmap:
         if self.view_focals_px is not None:
             if index >= len(self.view_focals_px):
                 raise InputError(f"prior backend: {len(self.view_focals_px)} view focals for view {index + 1}")
@@ -131,7 +136,7 @@ class PriorBackend:
         else:
             focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
-                               focal if self.perspective else None, hint)
+                               focal if self.perspective else None, hint, widths)
         points = height_to_points(relief.height, mask, focal)
         return Pointmap(index, points, relief.confidence, float(focal))
 
@@ -159,7 +164,8 @@ def height_to_points(height: np.ndarray, mask: np.ndarray, focal: float) -> np.n
 
 
 def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float = 0.15,
-                  confidence_knee: float = 0.8, focal: float | None = None, hint: np.ndarray | None = None) -> FingerHeight:
+                  confidence_knee: float = 0.8, focal: float | None = None, hint: np.ndarray | None = None,
+                  widths: WidthReference | None = None) -> FingerHeight:
     """Relief (pixels) and confidence of a finger silhouette under the swept-section model.
 
     With ``focal`` (pixels) the relief is ray cast in perspective: the model is the swept
@@ -170,7 +176,9 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     iterates rise monotonically to the first hit without overshooting. Off the
     optical axis the camera sees round the finger's side and over its tip, so the relief
     seen at a pixel is the model's a little further from the image centre. Without ``focal``
-    the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s.
+    the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s;
+    ``widths``: the chord half-widths the capture's other views give where the frame cuts this one along its side
+    (:func:`~fingersplat3d.segment.silhouette.side_cut_widths`).
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
@@ -182,7 +190,7 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     s = du * axis[0] + dv * axis[1]
     t = du * normal[0] + dv * normal[1]
     on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
-    sections = chord_sections(s, t, on_border, smoothing)
+    sections = chord_sections(s, t, on_border, smoothing, along_axis(widths, origin, axis))
     relief = sections.height(s, t) * depth_ratio
     if focal is not None:
         centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0]) - origin

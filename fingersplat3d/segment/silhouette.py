@@ -12,7 +12,8 @@ straight axis, shrinking over the fingertip cap. Its silhouette is described by
   :func:`silhouette_frame` and :func:`orient_frames`);
 * at every 1-pixel station ``s`` along the axis, the chord across the silhouette: half-width
   ``w(s)`` and centre ``c(s)`` in the across coordinate ``t``; chords cut by the image border are
-  completed from their neighbours (the finger goes on beyond the frame), both are median filtered
+  completed from their neighbours (the finger goes on beyond the frame), or where the border cuts a view along its
+  side from the capture's other views (:mod:`fingersplat3d.segment.side_cut`), both are median filtered
   and ``w^2`` is fitted by local quadratics (no 1-px terraces; exact on an ellipsoidal cap).
 
 Used by the ``prior`` pointmap backend (relief from the chords) and by the cylinder charts of
@@ -21,14 +22,15 @@ Used by the ``prior`` pointmap backend (relief from the chords) and by the cylin
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
 __all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
-           "silhouette_frame", "orient_frames", "local_quadratic", "widest_disc", "TIP_BASES"]
+           "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "on_edges", "WidthReference", "local_quadratic",
+           "widest_disc", "TIP_BASES", "SIDE_CUT_WIDTHS"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -36,6 +38,8 @@ TIP_BASES = {
     "other views": "neither end is told apart by the outline; this end points the way of the tip in the other views",
 }
 """How the tip end of a silhouette was chosen (:attr:`SilhouetteFrame.tip_basis`), in words."""
+SIDE_CUT_WIDTHS = "the frame cuts this view along its side: its widths there were taken from the other views"
+"""What ``report.json`` says of a view whose chords took their widths from the others (:attr:`SilhouetteFrame.widths_from_views`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +119,7 @@ def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.nd
     return axis, centre
 
 
-def _on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.ndarray]:
+def on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.ndarray]:
     """Which of the pixels ``(u, v)`` lie on the image's top, bottom, left and right edge."""
     rows, cols = shape
     return [v == 0, v == rows - 1, u == 0, u == cols - 1]
@@ -124,7 +128,7 @@ def _on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.n
 def _frame_axis(u: np.ndarray, v: np.ndarray, shape: tuple[int, int], axis: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
     """The axis the frame's cuts give (:func:`finger_axis`), None where they give none (no cut, or a principal direction
     that already runs within 45 degrees of the way in from a single cut)."""
-    edges = _on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
+    edges = on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
     counts = np.array([int(edge.sum()) for edge in edges])
 
     def cuts(chosen: list[int]) -> bool:
@@ -181,7 +185,7 @@ def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
         if u.size < 16:
             continue
         axis, centre = principal_axis(u, v)
-        if any(edge.any() for edge in _on_edges(u, v, mask.shape)):
+        if any(edge.any() for edge in on_edges(u, v, mask.shape)):
             continue  # the frame cuts it: its own cuts say more
         free.append((index, axis, _outline(mask, centre)))
     if len(free) < 2:
@@ -242,23 +246,15 @@ def _end_to_end(points: np.ndarray, tangents: np.ndarray, direction: np.ndarray)
     return points[high].mean(0) - points[low].mean(0)
 
 
-def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float) -> Sections:
-    """Per-station (1 px along the axis) chord half-width and centre, completed and smoothed."""
+def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothing: float,
+                   expected: Callable[[np.ndarray], np.ndarray] | None = None) -> Sections:
+    """Per-station (1 px along the axis) chord half-width and centre, completed and smoothed.
+
+    ``expected``: the half-widths the capture's other views give at stations ``s`` (NaN where they give none,
+    :func:`~fingersplat3d.segment.side_cut.side_cut_widths`); a chord the frame cuts takes it where given, and its neighbours' otherwise."""
     s0 = float(s.min())
-    index = np.floor(s - s0).astype(np.int64)
-    count = int(index.max()) + 1
-    low = np.full(count, np.inf)
-    high = np.full(count, -np.inf)
-    np.minimum.at(low, index, t)
-    np.maximum.at(high, index, t)
-    present = np.isfinite(low)
-    # A chord end on the image border is cut by the frame, not by the finger's outline.
-    border_low = np.full(count, np.inf)
-    border_high = np.full(count, -np.inf)
-    np.minimum.at(border_low, index[on_border], t[on_border])
-    np.maximum.at(border_high, index[on_border], t[on_border])
-    cut_low = present & (border_low <= low + 1.0)
-    cut_high = present & (border_high >= high - 1.0)
+    low, high, present, cut_low, cut_high = raw_chords(s, t, on_border, s0)
+    count = low.size
     with np.errstate(invalid="ignore"):  # stations with no chord hold inf bounds: NaN there, as meant
         half_width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)  # +0.5: pixels have extent
         centre = np.where(present, 0.5 * (high + low), np.nan)
@@ -266,9 +262,13 @@ def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothin
     cut = present & ~whole
     stations = np.arange(count)
     if cut.any() and whole.any():
-        # Complete the width from the nearest whole chords and keep the seen end where it is
+        # Complete the width from the nearest whole chords (or the other views') and keep the seen end where it is
         # (a chord cut at both ends takes its centre from its neighbours too).
-        half_width[cut] = np.maximum(np.interp(stations[cut], stations[whole], half_width[whole]), half_width[cut])
+        completed = np.interp(stations[cut], stations[whole], half_width[whole])
+        if expected is not None:
+            given = np.asarray(expected(s0 + stations[cut] + 0.5), np.float64)
+            completed = np.where(np.isfinite(given), given, completed)
+        half_width[cut] = np.maximum(completed, half_width[cut])
         seen_high = cut & cut_low & ~cut_high
         seen_low = cut & cut_high & ~cut_low
         centre[seen_high] = high[seen_high] + 0.5 - half_width[seen_high]
@@ -290,6 +290,23 @@ def chord_sections(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, smoothin
             half_width = np.sqrt(np.maximum(local_quadratic(half_width ** 2, window), 0.25))
             centre = local_quadratic(centre, window)
     return Sections(s0, half_width, centre)
+
+
+def raw_chords(s: np.ndarray, t: np.ndarray, on_border: np.ndarray, s0: float):
+    """Per 1-px station from ``s0``: the chord's lowest and highest ``t``, whether it has pixels, and whether the image
+    border cuts its low or high end (the frame's cut, not the finger's outline)."""
+    index = np.floor(s - s0).astype(np.int64)
+    count = int(index.max()) + 1
+    low = np.full(count, np.inf)
+    high = np.full(count, -np.inf)
+    np.minimum.at(low, index, t)
+    np.maximum.at(high, index, t)
+    present = np.isfinite(low)
+    border_low = np.full(count, np.inf)
+    border_high = np.full(count, -np.inf)
+    np.minimum.at(border_low, index[on_border], t[on_border])
+    np.maximum.at(border_high, index[on_border], t[on_border])
+    return low, high, present, present & (border_low <= low + 1.0), present & (border_high >= high - 1.0)
 
 
 def local_quadratic(values: np.ndarray, window: int) -> np.ndarray:
@@ -329,6 +346,9 @@ class SilhouetteFrame:
     median width (straight line fitted to the middle 80 % of stations; ~0.2 on a distal phalanx)."""
     tip_basis: str = "outline"
     """Which rule chose the tip end: a key of :data:`TIP_BASES`."""
+    widths_from_views: bool = False
+    """Whether the frame cuts this view along its side and its chords there took their widths from the capture's
+    other views (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`)."""
 
     @property
     def tip_side(self) -> str:
@@ -362,7 +382,7 @@ def _taper(sections: Sections) -> float:
 
 
 def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarray | None = None,
-                     hint: np.ndarray | None = None) -> SilhouetteFrame:
+                     hint: np.ndarray | None = None, widths: WidthReference | None = None) -> SilhouetteFrame:
     """The axis frame and chord sections of a finger mask (see the module docstring).
 
     The tip is the end of the silhouette whose last stations do not touch the image border. When
@@ -372,7 +392,8 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
     sign of the axis fixes the sign of ``normal``, so two views of one finger from cameras turned
     about it get frames that agree: their surface angles (:mod:`fingersplat3d.align.correspond.chart`)
     differ by the turn. ``hint``: the axis of an outline the frame does not cut, from the capture's views
-    (:func:`capture_axes`).
+    (:func:`capture_axes`); ``widths``: the chord half-widths the capture's other views give where the frame cuts
+    this one along its side (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`).
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
@@ -384,7 +405,7 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
         normal = np.array([-direction[1], direction[0]])
         s = (u - origin[0]) * direction[0] + (v - origin[1]) * direction[1]
         t = (u - origin[0]) * normal[0] + (v - origin[1]) * normal[1]
-        return s, normal, chord_sections(s, t, on_border, smoothing)
+        return s, normal, chord_sections(s, t, on_border, smoothing, along_axis(widths, origin, direction))
 
     s, normal, sections = chords(axis)
     end = max(2.0, 0.01 * float(np.ptp(s)))
@@ -402,7 +423,7 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
         axis = -axis
         s, normal, sections = chords(axis)
         taper = -taper
-    return SilhouetteFrame(axis, normal, origin, sections, float(s.max()) + 0.5, tip_found, taper, basis)
+    return SilhouetteFrame(axis, normal, origin, sections, float(s.max()) + 0.5, tip_found, taper, basis, widths is not None)
 
 
 def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[SilhouetteFrame]:
@@ -413,6 +434,8 @@ def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Silh
     tapers agree on, each weighted by how clearly it tapers. Cameras turned about a finger see its
     axis the same way round, and one view's taper can be lost in the noise of its outline where the
     capture's is not. Outlines the frame does not cut take the axis the views agree on (:func:`capture_axes`).
+    A view the frame cuts along its side keeps its own widths here (see
+    :func:`~fingersplat3d.segment.side_cut.capture_frames`).
     """
     hints = capture_axes(masks)
     frames = [silhouette_frame(mask, smoothing, hint=hint) for mask, hint in zip(masks, hints)]
@@ -429,3 +452,14 @@ def orient_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Silh
         else:
             oriented.append(silhouette_frame(mask, smoothing, toward=toward, hint=hint))
     return oriented
+
+
+WidthReference = Callable[[np.ndarray], np.ndarray]
+"""Pixels ``uv [N, 2]`` on a view's axis -> the chord half-widths expected there (NaN where none is known)."""
+
+
+def along_axis(widths: WidthReference | None, origin: np.ndarray, axis: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+    """``widths`` read at axis coordinates ``s`` of a frame (``origin + s * axis``), for :func:`chord_sections`."""
+    if widths is None:
+        return None
+    return lambda s: widths(np.asarray(origin, np.float64) + np.asarray(s, np.float64)[:, None] * np.asarray(axis, np.float64))

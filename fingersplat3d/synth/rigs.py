@@ -23,7 +23,7 @@ from ..scene import Camera, look_at
 from .shape import FingerParams
 
 __all__ = ["RigView", "RIGS", "DEFAULT_SIZES", "ring_rig", "uwa_rig", "cfpose_rig", "rotation_about",
-           "random_finger_pose"]
+           "random_finger_pose", "default_focal"]
 
 RIGS = ("uwa", "cfpose", "ring")
 DEFAULT_SIZES = {"uwa": (1280, 1024), "ring": (1280, 1024), "cfpose": (1024, 1280)}
@@ -49,7 +49,7 @@ def rotation_about(axis: np.ndarray, degrees: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
 
 
-def _default_focal(size: tuple[int, int], distance: float = CAMERA_DISTANCE_MM) -> float:
+def default_focal(size: tuple[int, int], distance: float = CAMERA_DISTANCE_MM) -> float:
     """The focal that frames :data:`FIELD_OF_VIEW_MM` across the long side from ``distance`` mm."""
     return max(size) / FIELD_OF_VIEW_MM * distance
 
@@ -86,7 +86,7 @@ def ring_rig(params: FingerParams, angles_deg, size: tuple[int, int] = (1280, 10
     is fixed in the rig. ``tip_left`` turns every camera by 180 degrees about its optical axis, so
     the tip points left in the images (UWA's raw frames). ``distance``: camera to the rig axis (mm).
     """
-    focal = _default_focal(size, distance) if focal is None else float(focal)
+    focal = default_focal(size, distance) if focal is None else float(focal)
     target = _target(params)
     placement = np.eye(4) if finger_to_rig is None else np.asarray(finger_to_rig, np.float64)
     light = placement[:3, :3].T @ np.array([0.25, -0.2, -1.0])  # in front of the pad, a little toward the tip
@@ -118,7 +118,7 @@ def cfpose_rig(params: FingerParams, rng: np.random.Generator, size: tuple[int, 
     The first pose is frontal; the others spread roll over ``[-max_roll, max_roll]`` (stratified,
     so a finger gets both sides) with random pitch and in-plane yaw.
     """
-    focal = _default_focal(size, distance) if focal is None else float(focal)
+    focal = default_focal(size, distance) if focal is None else float(focal)
     pivot = _target(params)
     # Stage frame = finger frame at rest; the camera looks at the pad with the tip up in the image.
     stage_to_cam = look_at(pivot + [0.0, 0.0, -distance], pivot, [1.0, 0.0, 0.0])
