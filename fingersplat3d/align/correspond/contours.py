@@ -48,10 +48,10 @@ def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, 
         return empty
     camera_a, camera_b = _camera(alignment, a, depth_a.shape), _camera(alignment, b, mask_b.shape)
     frame = silhouette_frame(mask_b) if outline is None else outline
-    rows, cols = np.nonzero(np.isfinite(depth_a))
-    keep = (rows % stride == 0) & (cols % stride == 0)
-    uv_a = np.stack([cols[keep], rows[keep]], 1).astype(np.float64)
-    points = camera_a.unproject(uv_a, depth_a[rows[keep], cols[keep]])
+    rows, cols = np.nonzero(np.isfinite(depth_a[::stride, ::stride]))  # every stride-th pixel, in row-major order
+    rows, cols = rows * stride, cols * stride
+    uv_a = np.stack([cols, rows], 1).astype(np.float64)
+    points = camera_a.unproject(uv_a, depth_a[rows, cols])
     uv_in_b, z = camera_b.project(points)
     ok = np.isfinite(uv_in_b).all(1) & (z > 0)
     uv_a, points, uv_in_b = uv_a[ok], points[ok], uv_in_b[ok]
@@ -60,37 +60,48 @@ def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, 
     length = frame.sections.half_width.size
     stations = start + np.arange(_END_SHARE * length, (1 - _END_SHARE) * length, STATION_STEP_PX)
     height, width = mask_b.shape
-    found_a, found_b, information = [], [], []
+    # What depends on the station or the side alone, for all of them at once (the same arithmetic, element by element).
+    halves, centres = frame.sections.at(stations)
+    sides = (-1.0, 1.0)
+    edges = [frame.origin + stations[:, None] * frame.axis + (centres + side * halves)[:, None] * frame.normal
+             for side in sides]
+    on_image = [(_BORDER_PX <= edge[:, 0]) & (edge[:, 0] <= width - 1 - _BORDER_PX) & (_BORDER_PX <= edge[:, 1])
+                & (edge[:, 1] <= height - 1 - _BORDER_PX) for edge in edges]
     rotation_b = camera_b.rotation
+    normals_world = [rotation_b.T @ np.array([side * frame.normal[0], side * frame.normal[1], 0.0]) for side in sides]
     by_s = np.argsort(s, kind="stable")  # each station's points by two binary searches, not a pass over all of them
     lows = np.searchsorted(s[by_s], stations - 0.5 * STATION_STEP_PX - 1e-6, side="left")
     highs = np.searchsorted(s[by_s], stations + 0.5 * STATION_STEP_PX + 1e-6, side="right")
-    for station, low, high in zip(stations, lows, highs):
+    reach = REACH_PERIODS * period_px
+    chosen, chosen_sides = [], []
+    for k, (station, low, high) in enumerate(zip(stations, lows, highs)):
         near = np.sort(by_s[low:high])  # in index order, as the argmax below breaks ties by it
         near = near[np.abs(s[near] - station) <= 0.5 * STATION_STEP_PX]  # the window's test itself, to the bit
         if not near.size:
             continue
-        half, centre = frame.sections.at(np.array([station]))
-        for side in (-1.0, 1.0):
-            edge = frame.origin + station * frame.axis + (centre[0] + side * half[0]) * frame.normal
-            if not (_BORDER_PX <= edge[0] <= width - 1 - _BORDER_PX and _BORDER_PX <= edge[1] <= height - 1 - _BORDER_PX):
+        centre, half = centres[k], halves[k]
+        across = t[near] - centre
+        for j, side in enumerate(sides):
+            if not on_image[j][k]:
                 continue
-            best = near[int(np.argmax(side * (t[near] - centre[0])))]
-            if side * (t[best] - centre[0]) < half[0] - REACH_PERIODS * period_px:
+            best = near[int(np.argmax(side * across))]
+            if side * (t[best] - centre) < half - reach:
                 continue  # a's surface does not come near this side of b's outline
-            normal_image = side * frame.normal
-            normal_world = rotation_b.T @ np.array([normal_image[0], normal_image[1], 0.0])
-            sight = camera_a.center - points[best]
-            if normal_world @ sight / max(np.linalg.norm(sight), 1e-12) < MIN_FACING:
-                continue  # a does not see the skin at b's rim on this side
-            at = s[best]
-            half_at, centre_at = frame.sections.at(np.array([at]))
-            # One pixel inside the outermost mask pixel: where b's own pointmap still has depth (the correspondence
-            # needs it; the residual is a -> b only), at most a pixel short of the true outline.
-            station_point = frame.origin + at * frame.axis + (centre_at[0] + side * (half_at[0] - 1.0)) * frame.normal
-            found_a.append(uv_a[best])
-            found_b.append(station_point)
-            information.append(np.outer(normal_image, normal_image))
-    if not found_a:
+            chosen.append(best)
+            chosen_sides.append(j)
+    if not chosen:
         return empty
-    return np.array(found_a), np.array(found_b), np.array(information)
+    chosen, chosen_sides = np.asarray(chosen), np.asarray(chosen_sides)
+    sight = camera_a.center - points[chosen]
+    facing = np.einsum("nk,nk->n", np.stack([normals_world[j] for j in chosen_sides]), sight)
+    keep = facing / np.maximum(np.linalg.norm(sight, axis=1), 1e-12) >= MIN_FACING  # a sees the skin at b's rim
+    if not keep.any():
+        return empty
+    chosen, side = chosen[keep], np.asarray(sides)[chosen_sides[keep]]
+    half_at, centre_at = frame.sections.at(s[chosen])
+    # One pixel inside the outermost mask pixel: where b's own pointmap still has depth (the correspondence needs it;
+    # the residual is a -> b only), at most a pixel short of the true outline.
+    station_points = (frame.origin + s[chosen][:, None] * frame.axis
+                      + (centre_at + side * (half_at - 1.0))[:, None] * frame.normal)
+    normal_image = side[:, None] * frame.normal
+    return uv_a[chosen], station_points, np.einsum("ni,nj->nij", normal_image, normal_image)
