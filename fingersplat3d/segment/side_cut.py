@@ -33,7 +33,7 @@ def capture_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Sil
     hints = capture_axes(masks)
     return [frame if reference is None else
             silhouette_frame(mask, smoothing, toward=frame.axis, hint=hint, widths=reference)
-            for mask, frame, hint, reference in zip(masks, frames, hints, side_cut_widths(masks, frames))]
+            for mask, frame, hint, reference in zip(masks, frames, hints, side_cut_widths(masks, frames, hints))]
 
 
 def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFrame] | None = None,
@@ -48,17 +48,16 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
     cuts at one side over :data:`SIDE_CUT_SHARE` of its stations takes, at each cut station, another view's whole
     chord at the same distance from the tip times the two views' median ratio over the whole chords they share off the
     tip's cap (:data:`MIN_SHARED_STATIONS` at least; the median over the views that give one). None for a view that
-    is not cut so, or that no other view can stand in for. ``frames``:
-    :func:`~fingersplat3d.segment.silhouette.orient_frames`'s;
-    without them, a capture no view of which the border touches along its axis is answered before any frame is made
-    (``hints``: :func:`capture_axes`'s, when the caller holds them).
+    is not cut so, or that no other view can stand in for. A capture no view of which the border touches along its
+    axis is answered before any frame is made or read (``frames``:
+    :func:`~fingersplat3d.segment.silhouette.orient_frames`'s, ``hints``: :func:`capture_axes`'s, when the caller
+    holds them).
     """
     masks = [np.asarray(mask, bool) for mask in masks]
-    if frames is None:
-        hints = capture_axes(masks) if hints is None else hints
-        if len(masks) < 2 or not any(_may_be_side_cut(mask, hint) for mask, hint in zip(masks, hints)):
-            return [None] * len(masks)  # (the frames cost more than this look: a tenth of a second a view at 1280 px)
-        frames = orient_frames(masks)
+    hints = capture_axes(masks) if hints is None else hints
+    if len(masks) < 2 or not any(_may_be_side_cut(mask, hint) for mask, hint in zip(masks, hints)):
+        return [None] * len(masks)  # (the frames cost more than this look: a tenth of a second a view at 1280 px)
+    frames = orient_frames(masks) if frames is None else frames
     profiles = [_station_profile(mask, frame) for mask, frame in zip(masks, frames)]
     references: list[WidthReference | None] = []
     for index, (frame, (sigma, width, whole, share)) in enumerate(zip(frames, profiles)):
