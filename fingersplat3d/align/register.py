@@ -359,8 +359,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     # One tip end for the whole capture: on crops cut at both ends a view's own choice can disagree
     # with the others', and charts running opposite ways share no turn.
     frames = capture_frames(prepared.masks)
-    tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]} | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {})
-            for frame in frames]
+    tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]}
+            | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {}) for frame in frames]
     if config.matcher == "surface":
         charts = [CylinderChart.from_frame(frame) for frame in frames]
         step = max(1.0, prepared.period / 8.0)

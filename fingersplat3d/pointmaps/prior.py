@@ -112,7 +112,7 @@ class PriorBackend:
     def predict_views(self, views: Sequence[View]) -> list[Pointmap]:
         """One own-frame pointmap per view, on the view's pixel grid; outlines the frame does not cut take the axis
         the views agree on (:func:`~fingersplat3d.segment.silhouette.capture_axes`), and chords the frame cuts along a
-        view's side take their widths from the other views (:func:`~fingersplat3d.segment.silhouette.side_cut_widths`)."""
+        view's side take their widths from the other views (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`)."""
         masks = [self._mask(view) for view in views]
         hints = capture_axes(masks)
         widths = side_cut_widths(masks, hints=hints)
@@ -178,7 +178,7 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     seen at a pixel is the model's a little further from the image centre. Without ``focal``
     the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s;
     ``widths``: the chord half-widths the capture's other views give where the frame cuts this one along its side
-    (:func:`~fingersplat3d.segment.silhouette.side_cut_widths`).
+    (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`).
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
