@@ -115,9 +115,10 @@ class PriorBackend:
         view's side take their widths from the other views (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`)."""
         masks = [self._mask(view) for view in views]
         hints = capture_axes(masks)
-        widths = side_cut_widths(masks, hints=hints)
-        return [self._predict(index, view, mask, hint, width)
-                for index, (view, mask, hint, width) in enumerate(zip(views, masks, hints, widths))]
+        axes = [finger_axis(mask, hint) for mask, hint in zip(masks, hints)]  # (axis, origin) per view, found once
+        widths = side_cut_widths(masks, axes=[axis for axis, _ in axes])
+        return [self._predict(index, view, mask, axis, width)
+                for index, (view, mask, axis, width) in enumerate(zip(views, masks, axes, widths))]
 
     @staticmethod
     def _mask(view: View) -> np.ndarray:
@@ -127,7 +128,7 @@ class PriorBackend:
             raise InputError(f"view {view.name!r}: the mask is empty")
         return view.mask
 
-    def _predict(self, index: int, view: View, mask: np.ndarray, hint: np.ndarray | None,
+    def _predict(self, index: int, view: View, mask: np.ndarray, axis: tuple[np.ndarray, np.ndarray],
                  widths: WidthReference | None = None) -> Pointmap:
         if self.view_focals_px is not None:
             if index >= len(self.view_focals_px):
@@ -136,7 +137,7 @@ class PriorBackend:
         else:
             focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
-                               focal if self.perspective else None, hint, widths)
+                               focal if self.perspective else None, widths=widths, axis=axis)
         points = height_to_points(relief.height, mask, focal)
         return Pointmap(index, points, relief.confidence, float(focal))
 
@@ -165,7 +166,8 @@ def height_to_points(height: np.ndarray, mask: np.ndarray, focal: float) -> np.n
 
 def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float = 0.15,
                   confidence_knee: float = 0.8, focal: float | None = None, hint: np.ndarray | None = None,
-                  widths: WidthReference | None = None) -> FingerHeight:
+                  widths: WidthReference | None = None,
+                  axis: tuple[np.ndarray, np.ndarray] | None = None) -> FingerHeight:
     """Relief (pixels) and confidence of a finger silhouette under the swept-section model.
 
     With ``focal`` (pixels) the relief is ray cast in perspective: the model is the swept
@@ -178,12 +180,13 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     seen at a pixel is the model's a little further from the image centre. Without ``focal``
     the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s;
     ``widths``: the chord half-widths the capture's other views give where the frame cuts this one along its side
-    (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`).
+    (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`); ``axis``: ``finger_axis(mask, hint)`` when the caller
+    has it already.
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
     v, u = np.nonzero(mask)
-    axis, origin = finger_axis(mask, hint)
+    axis, origin = finger_axis(mask, hint) if axis is None else axis
     normal = np.array([-axis[1], axis[0]])
     # Coordinates along (s) and across (t) the axis, for the mask pixels only.
     du, dv = u - origin[0], v - origin[1]

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import cv2
 import numpy as np
 
-from .silhouette import (SilhouetteFrame, WidthReference, capture_axes, finger_axis, on_edges, orient_frames, raw_chords,
+from .silhouette import (SilhouetteFrame, WidthReference, capture_axes, finger_axis, orient_frames, raw_chords,
                          silhouette_frame)
 
 __all__ = ["capture_frames", "side_cut_widths", "SIDE_CUT_SHARE", "MIN_SHARED_STATIONS"]
@@ -37,7 +38,8 @@ def capture_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[Sil
 
 
 def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFrame] | None = None,
-                    hints: Sequence[np.ndarray | None] | None = None) -> list[WidthReference | None]:
+                    hints: Sequence[np.ndarray | None] | None = None,
+                    axes: Sequence[np.ndarray] | None = None) -> list[WidthReference | None]:
     """Per view of one capture, the chord half-widths the other views give it where the frame cuts it along its side.
 
     A finger the image border cuts along its side (a thick finger filling a side view, a phone's close-up) shows no
@@ -49,13 +51,19 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
     chord at the same distance from the tip times the two views' median ratio over the whole chords they share off the
     tip's cap (:data:`MIN_SHARED_STATIONS` at least; the median over the views that give one). None for a view that
     is not cut so, or that no other view can stand in for. A capture no view of which the border touches along its
-    axis is answered before any frame is made or read (``frames``:
-    :func:`~fingersplat3d.segment.silhouette.orient_frames`'s, ``hints``: :func:`capture_axes`'s, when the caller
-    holds them).
+    axis is answered before any frame is made or read. What the caller holds it passes: ``frames``
+    (:func:`~fingersplat3d.segment.silhouette.orient_frames`'s), ``hints`` (:func:`capture_axes`'s) or ``axes`` (each
+    view's :func:`finger_axis`; the frames' axes when they are given).
     """
     masks = [np.asarray(mask, bool) for mask in masks]
-    hints = capture_axes(masks) if hints is None else hints
-    if len(masks) < 2 or not any(_may_be_side_cut(mask, hint) for mask, hint in zip(masks, hints)):
+    if len(masks) < 2:
+        return [None] * len(masks)
+    if frames is not None:
+        axes = [frame.axis for frame in frames]
+    elif axes is None:
+        hints = capture_axes(masks) if hints is None else hints
+        axes = [finger_axis(mask, hint)[0] for mask, hint in zip(masks, hints)]
+    if not any(_may_be_side_cut(mask, axis) for mask, axis in zip(masks, axes)):
         return [None] * len(masks)  # (the frames cost more than this look: a tenth of a second a view at 1280 px)
     frames = orient_frames(masks) if frames is None else frames
     profiles = [_station_profile(mask, frame) for mask, frame in zip(masks, frames)]
@@ -84,16 +92,21 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
     return references
 
 
-def _may_be_side_cut(mask: np.ndarray, hint: np.ndarray | None) -> bool:
-    """Whether the border pixels of ``mask`` on edges along its axis could cut half of :data:`SIDE_CUT_SHARE` of its
-    stations (each border pixel of an edge at angle ``a`` to the axis cuts at most ``|cos a|`` of a station)."""
-    v, u = np.nonzero(mask)
-    if u.size < 16:
+def _may_be_side_cut(mask: np.ndarray, axis: np.ndarray) -> bool:
+    """Whether the border pixels of ``mask`` on edges along its ``axis`` could cut half of :data:`SIDE_CUT_SHARE` of its
+    stations (each border pixel of an edge at angle ``a`` to the axis cuts at most ``|cos a|`` of a station). Read from
+    the image's four edges and the mask's outer outlines (the extremes along any direction lie on them), not from
+    every pixel: this look runs on every capture."""
+    if int(np.count_nonzero(mask)) < 16:
         return False
-    axis, centre = finger_axis(mask, hint)
-    along = float(np.ptp((u - centre[0]) * axis[0] + (v - centre[1]) * axis[1])) + 1.0
-    top, bottom, left, right = (int(edge.sum()) for edge in on_edges(u, v, mask.shape))
-    return (top + bottom) * abs(float(axis[0])) + (left + right) * abs(float(axis[1])) > 0.5 * SIDE_CUT_SHARE * along
+    top, bottom, left, right = (int(np.count_nonzero(edge)) for edge in (mask[0], mask[-1], mask[:, 0], mask[:, -1]))
+    weighted = (top + bottom) * abs(float(axis[0])) + (left + right) * abs(float(axis[1]))
+    if weighted == 0.0:
+        return False
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    outline = np.concatenate([contour[:, 0, :] for contour in contours]).astype(np.float64)
+    along = float(np.ptp(outline @ np.asarray(axis, np.float64))) + 1.0
+    return weighted > 0.5 * SIDE_CUT_SHARE * along
 
 
 def _station_profile(mask: np.ndarray, frame: SilhouetteFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

@@ -29,7 +29,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 __all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
-           "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "on_edges", "WidthReference", "local_quadratic",
+           "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "WidthReference", "local_quadratic",
            "widest_disc", "TIP_BASES", "SIDE_CUT_WIDTHS"]
 
 TIP_BASES = {
@@ -119,7 +119,7 @@ def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.nd
     return axis, centre
 
 
-def on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.ndarray]:
+def _on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.ndarray]:
     """Which of the pixels ``(u, v)`` lie on the image's top, bottom, left and right edge."""
     rows, cols = shape
     return [v == 0, v == rows - 1, u == 0, u == cols - 1]
@@ -128,7 +128,7 @@ def on_edges(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> list[np.nd
 def _frame_axis(u: np.ndarray, v: np.ndarray, shape: tuple[int, int], axis: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
     """The axis the frame's cuts give (:func:`finger_axis`), None where they give none (no cut, or a principal direction
     that already runs within 45 degrees of the way in from a single cut)."""
-    edges = on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
+    edges = _on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
     counts = np.array([int(edge.sum()) for edge in edges])
 
     def cuts(chosen: list[int]) -> bool:
@@ -185,7 +185,7 @@ def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
         if u.size < 16:
             continue
         axis, centre = principal_axis(u, v)
-        if any(edge.any() for edge in on_edges(u, v, mask.shape)):
+        if any(edge.any() for edge in _on_edges(u, v, mask.shape)):
             continue  # the frame cuts it: its own cuts say more
         free.append((index, axis, _outline(mask, centre)))
     if len(free) < 2:
