@@ -5,6 +5,8 @@ that knows Open3D (imported lazily so that the pure-math modules never load it).
 """
 from __future__ import annotations
 
+import sys
+import types
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -14,7 +16,32 @@ from .scene import Capture, View, depth_normals
 if TYPE_CHECKING:  # pragma: no cover
     import open3d as o3d
 
-__all__ = ["points_to_cloud", "cloud_arrays", "view_point_cloud", "capture_point_cloud"]
+__all__ = ["points_to_cloud", "cloud_arrays", "view_point_cloud", "capture_point_cloud", "skip_open3d_web_viewer"]
+
+_WEB_VIEWER = "open3d.visualization.draw_plotly"
+_WEB_VIEWER_NAMES = ("get_plotly_fig", "draw_plotly", "draw_plotly_server")
+
+
+def skip_open3d_web_viewer() -> None:
+    """Let ``import open3d`` skip its Plotly/Dash viewer, which nothing here uses.
+
+    Open3D imports ``open3d.visualization.draw_plotly`` on every ``import open3d``, and that imports Dash
+    and IPython: 1.1 s of the 2.0 s the import takes on 2 cores, in every ``fs3d`` command and every
+    batch worker. Called by those entry points only (never on ``import fingersplat3d``, so a user's own
+    session keeps Open3D whole); a no-op once Open3D is imported. In its place, a module whose functions
+    say why they are missing.
+    """
+    if "open3d" in sys.modules or _WEB_VIEWER in sys.modules:
+        return
+
+    def missing(*args, **kwargs):
+        raise RuntimeError("Open3D's Plotly viewer is not loaded in an fs3d process; "
+                           "use it from your own Python session")
+
+    stub = types.ModuleType(_WEB_VIEWER, "Open3D's Plotly viewer, not loaded (see fingersplat3d.geometry).")
+    for name in _WEB_VIEWER_NAMES:
+        setattr(stub, name, missing)
+    sys.modules[_WEB_VIEWER] = stub
 
 
 def points_to_cloud(points: np.ndarray, colors: np.ndarray | None = None,

@@ -47,3 +47,39 @@ def test_points_to_cloud_gray_colours_become_rgb():
     cloud = points_to_cloud(np.zeros((5, 3)), np.linspace(0, 1, 5))
     _, colors, normals = cloud_arrays(cloud)
     assert colors.shape == (5, 3) and normals is None
+
+
+def test_open3d_loads_without_its_web_viewer_in_an_fs3d_process():
+    """The entry points' skip: Open3D works, Dash and IPython are not loaded, the viewer says why it is missing."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from fingersplat3d.geometry import skip_open3d_web_viewer, points_to_cloud\n"
+        "skip_open3d_web_viewer()\n"
+        "import open3d as o3d\n"
+        "cloud = points_to_cloud([[0, 0, 0], [1, 0, 0], [0, 1, 0]])\n"
+        "assert len(cloud.voxel_down_sample(0.1).points) == 3\n"
+        "assert 'dash' not in sys.modules and 'IPython' not in sys.modules\n"
+        "try:\n"
+        "    o3d.visualization.draw_plotly([cloud])\n"
+        "except RuntimeError as error:\n"
+        "    assert 'Plotly viewer' in str(error)\n"
+        "else:\n"
+        "    raise AssertionError('the viewer ran')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def test_the_web_viewer_skip_leaves_a_loaded_open3d_alone():
+    import sys
+
+    import open3d  # noqa: F401  (loaded whole, as in a user's session)
+
+    from fingersplat3d.geometry import skip_open3d_web_viewer
+
+    before = sys.modules.get("open3d.visualization.draw_plotly")
+    skip_open3d_web_viewer()
+    assert sys.modules.get("open3d.visualization.draw_plotly") is before

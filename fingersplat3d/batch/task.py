@@ -87,6 +87,9 @@ def record_failure(out: Path, row: dict) -> Path:
 def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
     """Fuse ``job`` into ``out/<name>/``; the row of the results table (``status``: done, not_registered, failed)."""
     from ..device import use_threads
+    from ..geometry import skip_open3d_web_viewer
+
+    skip_open3d_web_viewer()  # before the pipeline's modules load Open3D
     from ..pipeline import fuse, write_reconstruction_files
 
     use_threads(options.threads)

@@ -11,6 +11,7 @@ import warnings
 
 from .. import __version__
 from ..errors import EXIT_INPUT, FS3DError, InputNote
+from ..geometry import skip_open3d_web_viewer
 from . import (
     batch,
     bench,
@@ -84,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         if stop.code == EXIT_INPUT:
             return EXIT_INPUT
         raise
+    skip_open3d_web_viewer()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always", InputNote)
