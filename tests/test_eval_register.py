@@ -99,6 +99,9 @@ def test_command_with_ground_truth_mates(fused, tmp_path, capsys):
     for row in rows:  # the mates-free check: A's ridges land on B's, in phase
         if row["method"] == "3D":
             assert float(row["warp_shift_px"]) < 2.0 and float(row["warp_ncc"]) > 0.4
+            # what is left after a smooth flow: at least as much agreement, under a pixel of shift across the ridges
+            assert float(row["warp_ncc_flowed"]) >= float(row["warp_ncc"]) - 0.02
+            assert 0.0 <= float(row["warp_residual_depth_px"]) < 1.0
     assert len(list((out / "pictures").glob("*.png"))) == 2 and len(list((out / "mates").glob("*.csv"))) == 2
     summary = (out / "summary.md").read_text()
     assert "52.27" in summary and "| uwa_seed0 | center -> left |" in summary
@@ -140,3 +143,16 @@ def test_the_summary_says_when_the_warp_check_is_in_sample():
     assert "Median ridge NCC over 2 pairs: 0.50" in plain and "in-sample" not in plain
     marked = summary_markdown([row("a", False), row("b", True)])
     assert "b: made with `fs3d fuse --photometric`" in marked and "in-sample" in marked
+
+
+def test_the_warp_residual_experiment_fits_one_pair_and_scores_the_other(fused):
+    """tools/bench_warp_residual.py's rows: a depth corrected by one pair's flow brings that pair's ridges closer (the
+    property it is built on); the pair it was not fitted to is scored too; no other finger here, so no control."""
+    from fingersplat3d.experiments.warp_residual import warp_residual_rows
+
+    rows = warp_residual_rows([fused])
+    assert {(r["view_a"], r["view_b"]) for r in rows} == {("left", "center"), ("right", "center")}
+    for row in rows:
+        assert row["depth_fitted_ncc_after"] > row["depth_fitted_ncc"]
+        assert np.isfinite(row["depth_held_out_ncc_after"]) and np.isnan(row["impostor_ncc_flowed"])
+        assert row["warp_ncc_flowed"] >= row["warp_ncc"] - 0.02

@@ -35,13 +35,14 @@ from ..io.reconstruction_folder import ReconstructionFolder
 from .tables import write_rows
 
 __all__ = ["PAPER_FIGURES", "Mates", "default_pairs", "read_mates_csv", "truth_mates", "matcher_mates",
-           "run_register_evaluation"]
+           "pair_textures", "warp_check", "run_register_evaluation"]
 
 PAPER_FIGURES = {"rigid 2D": 52.27, "TPS": 26.18, "VGGT": 10.45, "FingerSplat": 13.94}
 """The paper's mean distance (px) between mapped and mated minutiae on UWA ("UWA*" mates)."""
 METHODS = ("3D", "rigid 2D", "TPS")
 COLUMNS = ("reconstruction", "view_a", "view_b", "mates_source", "mates", "scored", "method", "mean_px",
-           "median_px", "p90_px", "warp_shift_px", "warp_ncc", "warp_fitted", "status", "reason")
+           "median_px", "p90_px", "warp_shift_px", "warp_ncc", "warp_ncc_flowed", "warp_residual_depth_px",
+           "warp_residual_pose_px", "warp_fitted", "status", "reason")
 COLOURS = {"3D": (40, 40, 230), "rigid 2D": (230, 160, 40), "TPS": (200, 60, 200)}  # BGR
 
 
@@ -136,26 +137,49 @@ def _errors(mates: Mates, rec: ReconstructionFolder, view_a: str, view_b: str) -
     return errors, np.where(scored[:, None], carried, np.nan)
 
 
-def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: ReconstructionFolder, view_a: str, view_b: str) -> dict:
-    """A check of the 3D registration that needs no mates: photo A warped into B through the model,
-    both as ridge texture (band-passed, unit local RMS) where both see the finger; the global shift
-    between them by phase correlation (px; ~0 when the model carries A onto B) and their normalised
-    correlation as they are (ridges in phase: well above 0; half a ridge period off: about 0)."""
+def pair_textures(rec: ReconstructionFolder, view_a: str, view_b: str, *, photo_a: np.ndarray | None = None,
+                  photo_b: np.ndarray | None = None, depth_b: np.ndarray | None = None):
+    """``(texture_a, texture_b, both, period)``: photo A carried into B through B's depth, both as ridge texture
+    (band-passed, unit local RMS) where both see the finger, and B's ridge period; the folder's own photos and
+    depth unless given. ``both`` has fewer than 1000 pixels where the views share too little (``period`` NaN)."""
     from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_texture
     from ..align.transfer import warp_image
     from ..segment.masks import finger_mask
 
+    photo_a = rec.photo(view_a) if photo_a is None else photo_a
+    photo_b = rec.photo(view_b) if photo_b is None else photo_b
     camera_a, camera_b = rec.cameras.cameras[view_a], rec.cameras.cameras[view_b]
-    warped, valid = warp_image(as_gray(photo_a), rec.depth(view_a), camera_a, rec.depth(view_b), camera_b)
+    depth_b = rec.depth(view_b) if depth_b is None else depth_b
+    warped, valid = warp_image(as_gray(photo_a), rec.depth(view_a), camera_a, depth_b, camera_b)
     gray_b = as_gray(photo_b)
     both = valid & finger_mask(photo_b)
     if both.sum() < 1000:
-        return {"warp_shift_px": float("nan"), "warp_ncc": float("nan")}
+        return warped, gray_b, both, float("nan")
     period = estimate_ridge_period(gray_b, both)
-    texture_a, texture_b = ridge_texture(warped, both, period), ridge_texture(gray_b, both, period)
+    return ridge_texture(warped, both, period), ridge_texture(gray_b, both, period), both, period
+
+
+def warp_check(photo_a: np.ndarray, photo_b: np.ndarray, rec: ReconstructionFolder, view_a: str, view_b: str) -> dict:
+    """A check of the 3D registration that needs no mates: photo A warped into B through the model,
+    both as ridge texture (:func:`pair_textures`); the global shift between them by phase correlation (px; ~0
+    when the model carries A onto B) and their normalised correlation as they are (ridges in phase: well above 0;
+    half a ridge period off: about 0). Then what is left (:func:`fingersplat3d.eval.ridge_flow.flow_residual`):
+    the correlation after a smooth flow over six ridge periods (what a better geometry could reach at that scale)
+    and the flow's median shift across the ridges where a depth change could move them and where only the
+    cameras could."""
+    from ..eval.ridge_flow import flow_residual
+
+    texture_a, texture_b, both, period = pair_textures(rec, view_a, view_b, photo_a=photo_a, photo_b=photo_b)
+    if not np.isfinite(period):
+        return {key: float("nan") for key in ("warp_shift_px", "warp_ncc", "warp_ncc_flowed", "warp_residual_depth_px",
+                                              "warp_residual_pose_px")}
     (dx, dy), _ = cv2.phaseCorrelate(texture_a.astype(np.float64), texture_b.astype(np.float64))
-    ncc = float(np.corrcoef(texture_a[both], texture_b[both])[0, 1])
-    return {"warp_shift_px": float(np.hypot(dx, dy)), "warp_ncc": ncc, "warp_fitted": rec.fitted_to_ridges}
+    camera_a, camera_b = rec.cameras.cameras[view_a], rec.cameras.cameras[view_b]
+    epipole = camera_b.K @ (camera_b.world_to_cam[:3, :3] @ camera_a.cam_to_world[:3, 3] + camera_b.world_to_cam[:3, 3])
+    left = flow_residual(texture_a, texture_b, both, period, epipole)
+    return {"warp_shift_px": float(np.hypot(dx, dy)), "warp_ncc": left["ncc"], "warp_ncc_flowed": left["ncc_flowed"],
+            "warp_residual_depth_px": left["shift_depth_px"], "warp_residual_pose_px": left["shift_pose_px"],
+            "warp_fitted": rec.fitted_to_ridges}
 
 
 def _picture(path: Path, photo_b: np.ndarray, mates: Mates, predictions: dict[str, np.ndarray]) -> None:
@@ -269,6 +293,12 @@ def run_register_evaluation(folders: list[Path], out: Path, *, pairs: list[tuple
     return rows
 
 
+def _median(rows: dict, key: str) -> float:
+    values = [float(r.get(key, np.nan)) for r in rows.values()]
+    values = [v for v in values if np.isfinite(v)]
+    return float(np.median(values)) if values else float("nan")
+
+
 def summary_markdown(rows: list[dict]) -> str:
     done = [r for r in rows if r["status"] == "done"]
     lines = ["# Registration error: minutiae carried from view A to view B", "",
@@ -304,7 +334,11 @@ def summary_markdown(rows: list[dict]) -> str:
         lines += ["", "Warp check of every pair, mates or not (shift px, ridge NCC): " + "; ".join(
             f"{key[0]} {key[1]} -> {key[2]}: {r['warp_shift_px']:.1f}, {r['warp_ncc']:.2f}" for key, r in sorted(checked.items())),
             "", f"Median ridge NCC over {len(checked)} pairs: "
-            f"{np.median([r['warp_ncc'] for r in checked.values()]):.2f}."]
+            f"{np.median([r['warp_ncc'] for r in checked.values()]):.2f}; after a smooth flow over six ridge periods "
+            f"(what a better geometry could reach at that scale) {_median(checked, 'warp_ncc_flowed'):.2f}. The flow's "
+            f"median shift across the ridges: {_median(checked, 'warp_residual_depth_px'):.1f} px where the ridges cross "
+            f"the epipolar lines (a depth change could move them), {_median(checked, 'warp_residual_pose_px'):.1f} px "
+            "where they run along them (only the cameras could)."]
         fitted = sorted({key[0] for key, r in checked.items() if r.get("warp_fitted")})
         if fitted:
             lines += ["", f"{', '.join(fitted)}: made with `fs3d fuse --photometric`, whose surfaces are fitted to this "
