@@ -44,7 +44,9 @@ def main(argv: list[str] | None = None) -> int:
     for row in rows:
         groups.setdefault("finger " + "_".join(row["reconstruction"].split("_")[:2]), []).append(row)
     for name, members in groups.items():
-        medians = [np.nanmedian([float(r.get(key, np.nan)) for r in members]) for key, _ in COLUMNS]
+        values = [[float(r.get(key, np.nan)) for r in members] for key, _ in COLUMNS]
+        medians = [np.median([v for v in column if np.isfinite(v)]) if np.isfinite(column).any() else np.nan
+                   for column in values]
         print(f"| **median, {name}** ({len(members)} pairs) | | " + " | ".join(f"{m:.2f}" for m in medians) + " |")
     return 0
 

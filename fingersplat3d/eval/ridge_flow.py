@@ -18,7 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["smooth_flow", "across_ridges", "flow_residual"]
+__all__ = ["smooth_flow", "resample", "across_ridges", "ncc", "flow_residual"]
 
 WINDOW_PERIODS = 6.0
 """Farneback window in ridge periods: several ridges, so the flow is the geometry's error, not a ridge's shape."""
@@ -56,7 +56,8 @@ def across_ridges(texture: np.ndarray, period: float) -> tuple[np.ndarray, np.nd
     return np.stack([np.cos(angle), np.sin(angle)], -1), coherence
 
 
-def _ncc(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+def ncc(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    """Normalised correlation of two images over ``mask`` (NaN with fewer than three pixels)."""
     return float(np.corrcoef(a[mask], b[mask])[0, 1]) if mask.sum() > 2 else float("nan")
 
 
@@ -71,7 +72,7 @@ def flow_residual(texture_a: np.ndarray, texture_b: np.ndarray, mask: np.ndarray
     direction, coherence = across_ridges(texture_b, period)
     shift = np.abs((flow * direction).sum(-1))
     ridges = mask & (coherence > 0.5)
-    out = {"ncc": _ncc(texture_a, texture_b, mask), "ncc_flowed": _ncc(resample(texture_a, flow), texture_b, mask),
+    out = {"ncc": ncc(texture_a, texture_b, mask), "ncc_flowed": ncc(resample(texture_a, flow), texture_b, mask),
            "shift_px": float(np.median(shift[ridges])) if ridges.any() else float("nan"),
            "shift_depth_px": float("nan"), "shift_pose_px": float("nan")}
     if epipole is not None:

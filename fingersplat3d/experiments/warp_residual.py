@@ -20,7 +20,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..eval.ridge_flow import across_ridges, flow_residual, ncc, smooth_flow
 from ..io.reconstruction_folder import ReconstructionFolder
+from .register import default_pairs, pair_textures, warp_check
 
 __all__ = ["depth_from_flow", "warp_residual_rows"]
 
@@ -29,15 +31,8 @@ SMOOTH_PERIODS = 2.0
 _MIN_REACH = 0.3  # |cos| between a unit of depth's motion and the across-ridge direction below which a pixel is not used
 
 
-def _ncc(a, b, mask) -> float:
-    return float(np.corrcoef(a[mask], b[mask])[0, 1]) if mask.sum() > 2 else float("nan")
-
-
 def depth_from_flow(rec: ReconstructionFolder, view_a: str, view_b: str, smooth_periods: float = SMOOTH_PERIODS) -> np.ndarray:
     """B's depth corrected so that the smooth flow of the pair ``A -> B`` across B's ridges is taken up by depth."""
-    from ..eval.ridge_flow import across_ridges, smooth_flow
-    from .register import pair_textures
-
     texture_a, texture_b, both, period = pair_textures(rec, view_a, view_b)
     if not np.isfinite(period):  # the views share too little: nothing to correct
         return rec.depth(view_b)
@@ -84,9 +79,6 @@ def _other_finger(rec: ReconstructionFolder, records: list[ReconstructionFolder]
 
 def warp_residual_rows(folders: list[Path], smooth_periods: float = SMOOTH_PERIODS) -> list[dict]:
     """One row per reconstruction and default pair (see the module docstring)."""
-    from ..eval.ridge_flow import flow_residual
-    from .register import default_pairs, pair_textures, warp_check
-
     records = [ReconstructionFolder(Path(f)) for f in folders]
     rows = []
     for rec in records:
@@ -107,7 +99,7 @@ def warp_residual_rows(folders: list[Path], smooth_periods: float = SMOOTH_PERIO
                 for key, view in (("fitted", a), ("held_out", held)):
                     before = pair_textures(rec, view, b)
                     after = pair_textures(rec, view, b, depth_b=depth)
-                    row[f"depth_{key}_ncc"] = _ncc(*before[:3])
-                    row[f"depth_{key}_ncc_after"] = _ncc(*after[:3])
+                    row[f"depth_{key}_ncc"] = ncc(*before[:3])
+                    row[f"depth_{key}_ncc_after"] = ncc(*after[:3])
             rows.append(row)
     return rows
