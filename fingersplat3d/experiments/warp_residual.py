@@ -84,9 +84,9 @@ def warp_residual_rows(folders: list[Path], smooth_periods: float = SMOOTH_PERIO
     for rec in records:
         pairs = default_pairs(rec.cameras)
         other = _other_finger(rec, records)
+        checks = {a: warp_check(rec.photo(a), rec.photo(b), rec, a, b) for b, a in pairs}  # each pair's, made once
         for b, a in pairs:
-            check = warp_check(rec.photo(a), rec.photo(b), rec, a, b)
-            row = {"reconstruction": rec.folder.name, "view_a": a, "view_b": b, **check,
+            row = {"reconstruction": rec.folder.name, "view_a": a, "view_b": b, **checks[a],
                    "impostor_ncc": float("nan"), "impostor_ncc_flowed": float("nan")}
             if other is not None:
                 texture_a, texture_b, both, period = pair_textures(rec, a, b, photo_a=other.photo(a))
@@ -97,9 +97,7 @@ def warp_residual_rows(folders: list[Path], smooth_periods: float = SMOOTH_PERIO
                 held = next(x for _, x in pairs if x != a)
                 depth = depth_from_flow(rec, a, b, smooth_periods)
                 for key, view in (("fitted", a), ("held_out", held)):
-                    before = pair_textures(rec, view, b)
-                    after = pair_textures(rec, view, b, depth_b=depth)
-                    row[f"depth_{key}_ncc"] = ncc(*before[:3])
-                    row[f"depth_{key}_ncc_after"] = ncc(*after[:3])
+                    row[f"depth_{key}_ncc"] = checks[view]["warp_ncc"]  # the warp check's own textures and depth
+                    row[f"depth_{key}_ncc_after"] = ncc(*pair_textures(rec, view, b, depth_b=depth)[:3])
             rows.append(row)
     return rows
