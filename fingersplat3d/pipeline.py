@@ -383,7 +383,8 @@ def register_capture(capture: Capture, config: FuseConfig | None = None, rig: Ri
     seed = capture.metadata.get("seed")
     name = str(capture.metadata.get("name") or ("_".join(capture.names) + ("" if seed is None else f"_seed{seed}")))
     return RigCapture(name, [pm.depth for pm in pointmaps], [pm.focal for pm in pointmaps], registration.correspondences,
-                      registration.alignment, [(view.width, view.height) for view in photos.views], tuple(capture.names))
+                      registration.alignment, [(view.width, view.height) for view in photos.views], tuple(capture.names),
+                      contours=registration.contours)
 
 
 def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: GlobalAlignment, report: dict) -> dict:

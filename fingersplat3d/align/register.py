@@ -35,7 +35,7 @@ registered pair reaches stay unaligned (the caller decides what that means). Pur
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import cached_property, partial
+from functools import cached_property
 from typing import Callable, Sequence
 
 import numpy as np
@@ -76,7 +76,7 @@ for the bas-relief: measured on another group's renders, a view beside the rolls
 -13 / 47 / 48, 0 / 47 / 48) came out 4.71, 3.92, 3.11 degrees off with the contours and 0.89, 0.16, 1.46 without
 (docs/measurements.md)."""
 CONTOUR_MIN_VIEWS_FOCAL_HELD = 2
-"""The same with the focal held (``--focal-px``, photos whose EXIF records it): two views' turn no longer slides with
+"""The same with the focal held (``--focal-px``, photos whose EXIF records it, a rig): two views' turn no longer slides with
 a fitted focal, and the contours shape the skin that only one of them sees instead of turning them. Measured on
 synthetic pairs of six kinds (45-90 degrees apart, ring, uwa and CFPose rigs, a 50 mm close-up; 3-5 seeds each), the
 true focal given: whole-view depth 0.10-0.45 -> 0.04-0.28 mm (median per kind), better on 24 captures of 26; the turns
@@ -181,6 +181,9 @@ class Registration:
     rounds: int
     correspondences: list[PairCorrespondences] = field(default_factory=list)
     """The verified correspondences the final alignment was fitted to (what a rig calibration pools)."""
+    contours: list[PairCorrespondences] = field(default_factory=list)
+    """The silhouette contours it was fitted to beside them (:mod:`~fingersplat3d.align.correspond.contours`; empty
+    when none joined): a rig calibration pools them too."""
     tips: list[dict] = field(default_factory=list)
     """Per view, the end taken for the fingertip: ``side`` (of the image) and ``why`` (in words)."""
     photometric: dict = field(default_factory=dict)
@@ -291,11 +294,13 @@ def _classic_guess(prepared: _Prepared, a: int, b: int, config: RegistrationConf
     return GuidedMatches(matches.uv_a, matches.uv_b, matches.score, identity, identity.copy())
 
 
-def _contours(alignment, prepared: _Prepared, config: RegistrationConfig) -> list[PairCorrespondences]:
+def _contours(alignment, prepared: _Prepared, config: RegistrationConfig, on_rig: bool = False) -> list[PairCorrespondences]:
     """Every aligned view's surface against every other aligned view's outline
-    (:mod:`~fingersplat3d.align.correspond.contours`), as one-way correspondences."""
+    (:mod:`~fingersplat3d.align.correspond.contours`), as one-way correspondences. ``on_rig``: a rig holds the cameras
+    and their focal, so two views take them as with a focal held."""
     placed = [v for v, ok in enumerate(alignment.aligned) if ok]
-    least = CONTOUR_MIN_VIEWS if config.global_align.optimize_focal else CONTOUR_MIN_VIEWS_FOCAL_HELD
+    held = on_rig or not config.global_align.optimize_focal
+    least = CONTOUR_MIN_VIEWS_FOCAL_HELD if held else CONTOUR_MIN_VIEWS
     if config.contour_weight <= 0 or distinct_viewpoints(alignment.world_to_cam, placed) < least:
         return []
     found = []
@@ -389,9 +394,14 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
     sizes = [(view.width, view.height) for view in views]
-    # Each solve without its curvature: only the last one's is reported, asked for once at the end.
-    align = (partial(global_align, uncertainty=False) if rig is None else
-             (lambda d, f, c, cfg, previous=None, min_turns=None: rig_align(d, f, c, cfg, rig, sizes, previous)))
+
+    def align(d, f, matches, cfg, previous=None, min_turns=None, contours=()):
+        """The views aligned on ``matches`` and the silhouette ``contours`` (which shape the skin, never place a view)."""
+        if rig is None:  # each solve without its curvature: only the last one's is reported, asked for once at the end
+            return global_align(d, f, list(matches) + list(contours), cfg, previous=previous, min_turns=min_turns,
+                                uncertainty=False)
+        return rig_align(d, f, matches, cfg, rig, sizes, previous, contours)
+
     alignment = align(depths, focals, registered, config.global_align)
     if ((config.undecided_peaks > 0 or config.undecided_zooms) and config.matcher == "surface" and rig is None
             and not all(alignment.aligned)):
@@ -399,6 +409,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         alignment = _placed_by_agreement(alignment, registered, pairs, records, prepared, charts, unwrapped, pointmaps,
                                          align, config, rng)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
+    contours: list[PairCorrespondences] = []
     # Each pair's least turn from the silhouettes: held by hinge rows only where GlobalAlignConfig.turn_bound_weight > 0.
     min_turns = np.radians(least_turns_deg(prepared.masks, alignment.depths, alignment.focals, prepared.outlines))
     placed = np.asarray(alignment.aligned, bool)
@@ -435,9 +446,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         refined = [p for p in refined if alignment.aligned[p.a] and alignment.aligned[p.b]]
         if not refined:
             break
-        contours = _contours(alignment, prepared, config) if rig is None else []
+        contours = _contours(alignment, prepared, config, on_rig=rig is not None)
         say(f"global alignment, round {rounds}")
-        alignment = align(depths, focals, refined + contours, config.global_align, previous=alignment, min_turns=min_turns)
+        alignment = align(depths, focals, refined, config.global_align, previous=alignment, min_turns=min_turns,
+                          contours=contours)
         solved_with = (refined + contours, min_turns)
         fitted = refined
     redrawn_at = None
@@ -460,8 +472,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
             if probe is not None:
                 alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=probe.summary())
-    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips, photometric,
-                        list(pointmaps), redrawn_at)
+    return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
+                        photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours)
 
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
