@@ -35,6 +35,13 @@ def registered(uwa640):
     return captures, [register_capture(blind(c), FuseConfig(splat=None)) for c in captures]
 
 
+@pytest.fixture(scope="module")
+def calibrated(registered):
+    """The rig calibrated from every registered capture (one joint fit, read by several tests)."""
+    captures, pooled = registered
+    return calibrate_rig(pooled, captures[0].names)
+
+
 def test_robust_mean_ignores_one_outlier_and_quarter_turns_compose():
     from scipy.spatial.transform import Rotation
 
@@ -45,10 +52,10 @@ def test_robust_mean_ignores_one_outlier_and_quarter_turns_compose():
     assert np.allclose(quarter_turn(1) @ quarter_turn(3), np.eye(3)) and np.allclose(quarter_turn(2), np.diag([-1, -1, 1]))
 
 
-def test_calibration_recovers_the_rig_better_than_single_captures(registered):
+def test_calibration_recovers_the_rig_better_than_single_captures(registered, calibrated):
     captures, pooled = registered
     assert all(all(c.alignment.aligned) for c in pooled)
-    calibration = calibrate_rig(pooled, captures[0].names)
+    calibration = calibrated
     rig = calibration.rig
     assert np.allclose(rig.rotations[0], np.eye(3)) and np.allclose(rig.centers[0], 0)
     errors = [rotation_angle_deg(rig.rotations[v], true_relative(captures[0], v)) for v in (1, 2)]
@@ -119,9 +126,9 @@ def test_rig_files_and_captures_that_do_not_fit_are_one_sentence(tmp_path, uwa64
     assert main(["fuse", str(capture_dir), "-o", str(tmp_path / "out"), "--no-splat", "--rig", str(path)]) == 2
 
 
-def test_register_views_with_a_rig_tries_both_quarter_turns_of_a_portrait_view(registered):
-    captures, pooled = registered
-    rig = calibrate_rig(pooled, captures[0].names).rig
+def test_register_views_with_a_rig_tries_both_quarter_turns_of_a_portrait_view(registered, calibrated):
+    captures, _ = registered
+    rig = calibrated.rig
     capture = blind(captures[1])
     turned = capture.views[0].with_(image=np.ascontiguousarray(np.rot90(capture.views[0].image)),
                                     mask=np.ascontiguousarray(np.rot90(capture.views[0].mask)))
@@ -135,12 +142,12 @@ def test_register_views_with_a_rig_tries_both_quarter_turns_of_a_portrait_view(r
     assert registration.contours  # the rig holds the cameras: the silhouette contours shape the skin
 
 
-def test_two_views_on_a_rig_take_the_silhouette_contours(registered):
+def test_two_views_on_a_rig_take_the_silhouette_contours(registered, calibrated):
     """A rig holds the focal (and the poses), so two views take the contours, as two views with a focal given do."""
     from fingersplat3d.pointmaps import get_backend
 
-    captures, pooled = registered
-    rig = calibrate_rig(pooled, captures[0].names).rig
+    captures, _ = registered
+    rig = calibrated.rig
     views = blind(captures[2]).views[:2]
     registration = register_views(views, get_backend("prior").predict_views(views), rig=rig.subset([0, 1]))
     assert all(registration.alignment.aligned)
