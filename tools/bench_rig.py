@@ -1,6 +1,6 @@
 """Benchmark rig self-calibration: real dev captures (no ground truth) and synthetic captures (a known rig).
 
-    python3 tools/bench_rig.py [--data ../shared/data/uwa-real-dev] [--synthetic-seeds 8] [--json out.json]
+    python3 tools/bench_rig.py [--data ../shared/data/uwa-real-dev] [--synthetic-seeds 8] [--focal each|one] [--json out.json]
 
 Real captures (``fs3d rig calibrate`` on all of them, then per capture):
 
@@ -60,10 +60,10 @@ def _rig_camera2(two, rig, view2):
     scale = np.linalg.norm(poses[1][:3, 3] - poses[0][:3, 3]) / np.linalg.norm(rig.centers[1])
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = land0 @ rig.rotations[2], poses[0][:3, 3] + scale * land0 @ rig.centers[2]
-    return Camera.from_focal(rig.focal, view2.width, view2.height, np.linalg.inv(pose))
+    return Camera.from_focal(rig.focals[2], view2.width, view2.height, np.linalg.inv(pose))
 
 
-def real(data: Path) -> dict:
+def real(data: Path, per_camera: bool = True) -> dict:
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
     from fingersplat3d.align.solve.rig import calibrate_rig
     from fingersplat3d.io.jobs import list_jobs, load_job
@@ -78,16 +78,16 @@ def real(data: Path) -> dict:
         pooled[job.name] = register_capture(captures[job.name], config)
     names = tuple(next(iter(captures.values())).names)
     start = time.perf_counter()
-    everything = calibrate_rig(list(pooled.values()), names, fit)
+    everything = calibrate_rig(list(pooled.values()), names, fit, per_camera)
     fit_s = time.perf_counter() - start
     by_finger = {}
     for finger in sorted({name.split("_")[1] for name in pooled}):
         chosen = [c for name, c in pooled.items() if name.split("_")[1] == finger]
-        by_finger[finger] = calibrate_rig(chosen, names, fit).rig
+        by_finger[finger] = calibrate_rig(chosen, names, fit, per_camera).rig
     fingers = sorted(by_finger)
     records = []
     for name, capture in captures.items():
-        others = calibrate_rig([c for other, c in pooled.items() if other != name], names, fit).rig
+        others = calibrate_rig([c for other, c in pooled.items() if other != name], names, fit, per_camera).rig
         start = time.perf_counter()
         three = fuse(capture, config, rig=others)
         seconds = time.perf_counter() - start
@@ -101,14 +101,14 @@ def real(data: Path) -> dict:
                         "rig_lovo": on_rig, "free_lovo": leave_one_view_out(free_three, free_two)})
         print(f"{name}: residual {records[-1]['residual_px']:.2f} px on the rig, texture NCC {on_rig.get('texture_ncc')} "
               f"(free {records[-1]['free_lovo']['texture_ncc']})", file=sys.stderr, flush=True)
-    return {"rig": {"angles_deg": _pair_angles(everything.rig), "focal": everything.rig.focal, "used": everything.used,
+    return {"rig": {"angles_deg": _pair_angles(everything.rig), "focals": everything.rig.focals.tolist(), "used": everything.used,
                     "left_out": everything.left_out, "fit_s": fit_s},
-            "fingers": {f: {"angles_deg": _pair_angles(by_finger[f]), "focal": by_finger[f].focal} for f in fingers},
+            "fingers": {f: {"angles_deg": _pair_angles(by_finger[f]), "focals": by_finger[f].focals.tolist()} for f in fingers},
             "finger_difference_deg": _rig_difference(by_finger[fingers[0]], by_finger[fingers[-1]]) if len(fingers) > 1 else None,
             "records": records}
 
 
-def synthetic(seeds: int) -> dict:
+def synthetic(seeds: int, per_camera: bool = True) -> dict:
     from fingersplat3d.align.solve.rig import calibrate_rig
     from fingersplat3d.eval import depth_errors, relative_rotation_errors
     from fingersplat3d.eval.poses import rotation_angle_deg
@@ -122,7 +122,7 @@ def synthetic(seeds: int) -> dict:
     blind = [Capture(tuple(v.with_(camera=None, depth=None) for v in c.views), c.metadata) for c in truths]
     train = [register_capture(c, config) for c in blind[:-2]]
     start = time.perf_counter()
-    calibration = calibrate_rig(train, truths[0].names, GlobalAlignConfig())
+    calibration = calibrate_rig(train, truths[0].names, GlobalAlignConfig(), per_camera)
     fit_s = time.perf_counter() - start
     poses = [np.linalg.inv(v.camera.world_to_cam)[:3, :3] for v in truths[0].views]
     rig_error = [float(rotation_angle_deg(calibration.rig.rotations[v], poses[0].T @ poses[v])) for v in (1, 2)]
@@ -137,7 +137,8 @@ def synthetic(seeds: int) -> dict:
             row[label] = {"rotation_deg": [float(x) for x in relative_rotation_errors([c.world_to_cam for c in result.cameras], gt)],
                           "depth_mae_mm": float(np.median([depth_errors(d, v.depth, v.mask).mae for d, v in zip(result.depths, truth.views)]))}
         held.append(row)
-    return {"seeds": seeds, "rig_error_deg": rig_error, "focal_ratio": calibration.rig.focal / truths[0].views[0].camera.K[0, 0],
+    return {"seeds": seeds, "rig_error_deg": rig_error,
+            "focal_ratios": (calibration.rig.focals / truths[0].views[0].camera.K[0, 0]).tolist(),
             "fit_s": fit_s, "left_out": calibration.left_out, "free_train_rotation_deg": free_single, "held_out": held}
 
 
@@ -147,14 +148,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--synthetic-seeds", type=int, default=8)
+    parser.add_argument("--focal", choices=("each", "one"), default="each",
+                        help="each camera its own focal length (default, as fs3d rig calibrate) or one for all")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     figures = {"machine": machine()}
     if args.synthetic_seeds >= 4:
-        figures["synthetic"] = synthetic(args.synthetic_seeds)
+        figures["synthetic"] = synthetic(args.synthetic_seeds, args.focal == "each")
         print(json.dumps(figures["synthetic"], indent=1, default=float), flush=True)
     if args.data.is_dir():
-        figures["real"] = real(args.data)
+        figures["real"] = real(args.data, args.focal == "each")
         print(json.dumps({k: v for k, v in figures["real"].items() if k != "records"}, indent=1, default=float))
         print("| capture | residual on the rig / free (px) | leave-one-view-out on the rig: outside mask, texture NCC | free (PnP) |")
         print("|---|---|---|---|")

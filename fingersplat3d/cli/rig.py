@@ -1,4 +1,4 @@
-"""``fs3d rig calibrate``: a fixed rig's poses and focal from many captures."""
+"""``fs3d rig calibrate``: a fixed rig's poses and focal lengths from many captures."""
 from __future__ import annotations
 
 import argparse
@@ -23,7 +23,7 @@ def add(commands) -> None:
     actions = rig.add_subparsers(dest="action", metavar="ACTION", required=True)
     calibrate = actions.add_parser(
         "calibrate", help="estimate the rig's camera poses and focal from many captures (no target needed)",
-        description="Register every capture (on Ray), then fit one set of camera poses and one focal length to "
+        description="Register every capture (on Ray), then fit one set of camera poses and focal lengths to "
                     "the correspondences of all captures jointly, leaving out captures that disagree. Writes "
                     "rig.json (the cameras.json schema without the finger) for 'fs3d fuse --rig' and 'fs3d batch --rig'.")
     add_dataset_arguments(calibrate)
@@ -31,6 +31,9 @@ def add(commands) -> None:
     calibrate.add_argument("--rounds", type=number(int, 0, 20), default=0,
                            help="then re-match every capture through the calibrated rig and fit again, this many times "
                                 "(default 0; each round costs one more registration per capture, see the README)")
+    calibrate.add_argument("--focal", choices=("each", "one"), default="each",
+                           help="each: every camera its own focal length (default; the UWA rig's front camera fits one "
+                                "6 %% shorter than its side cameras'); one: one focal length for all cameras")
     calibrate.add_argument("--overwrite", action="store_true", help="replace an existing file")
     calibrate.set_defaults(run=run)
 
@@ -61,8 +64,12 @@ def run(args: argparse.Namespace) -> int:
         return ray_map(register_job, selected, (config, args.threads_per_task, rig, factor), on_result,
                        address=args.address, cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
 
+    def calibrated(selected):
+        return in_photo_pixels(calibrate_rig(sorted(selected, key=lambda c: c.name), names[0], fit,
+                                             per_camera_focal=args.focal == "each"))
+
     def in_photo_pixels(calibration):  # the rig file's focal is the photos' (any later fuse scales it its own way)
-        return replace(calibration, rig=replace(calibration.rig, focal=calibration.rig.focal / factor))
+        return replace(calibration, rig=replace(calibration.rig, focals=calibration.rig.focals / factor))
 
     run = register(jobs)
     names = sorted({c.view_names for c in captures})
@@ -74,14 +81,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"the captures do not share one set of view names ({names}); a rig's captures must")
     start = time.perf_counter()
     fit = GlobalAlignConfig()  # Levenberg-Marquardt, as a single capture's alignment
-    calibration = in_photo_pixels(calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit))
+    calibration = calibrated(captures)
     for round_ in range(args.rounds):  # re-match through the rig, fit again (its matches snap to the right ridges)
         used = [job for job in jobs if job.name in calibration.used]
         captures.clear()
         register(used, calibration.rig, desc=f"fs3d rig calibrate: round {round_ + 1}")
         if len(captures) < 2:
             break
-        calibration = in_photo_pixels(calibrate_rig(sorted(captures, key=lambda c: c.name), names[0], fit))
+        calibration = calibrated(captures)
     rig = calibration.rig
     rig.info.update(failed=failures, rounds=args.rounds, register_seconds=round(run["wall_s"], 1),
                     fit_seconds=round(time.perf_counter() - start, 1))
@@ -90,8 +97,10 @@ def run(args: argparse.Namespace) -> int:
 
     angles = ", ".join(f"{rig.names[i]}-{rig.names[j]} {rotation_angle_deg(rig.rotations[i], rig.rotations[j]):.2f} deg"
                        for i in range(len(rig.names)) for j in range(i + 1, len(rig.names)))
+    focals = (f"focal {rig.focal:.1f} px" if rig.one_focal else
+              "focals " + ", ".join(f"{name} {focal:.1f}" for name, focal in zip(rig.names, rig.focals)) + " px")
     print(f"wrote {args.output}: {len(calibration.used)} captures used ({len(calibration.left_out)} left out, "
-          f"{len(failures)} not registered), focal {rig.focal:.1f} px, {angles}")
+          f"{len(failures)} not registered), {focals}, {angles}")
     return 0
 
 

@@ -3,9 +3,9 @@
 One entry per camera (``name``, ``width``, ``height``, ``K``, ``world_to_cam``); the world is the
 rig frame (camera 0's), units ``"arbitrary"`` (camera 0's median depth of the finger in the first
 capture used = 1); ``image`` says which camera it is (``"camera f0"``). A top-level ``"rig"`` object
-records how it was calibrated (captures used and left out, residuals). Every camera has the same
-focal length and its principal point at the image centre (the model of
-:mod:`fingersplat3d.align.solve.rig`); a file that breaks this is an ``InputError`` naming it.
+records how it was calibrated (captures used and left out, residuals). Every camera has square pixels
+and its principal point at the image centre (the model of :mod:`fingersplat3d.align.solve.rig`; the
+cameras' focal lengths may differ); a file that breaks this is an ``InputError`` naming it.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def write_rig(path: str | Path, rig: Rig) -> Path:
     """Write ``rig`` to ``path`` atomically; returns the path."""
     entries = []
     for v, (name, (width, height)) in enumerate(zip(rig.names, rig.sizes)):
-        entries.append((name, f"camera {name}", Camera.from_focal(rig.focal, width, height, np.linalg.inv(rig.cam_to_rig(v)))))
+        entries.append((name, f"camera {name}", Camera.from_focal(rig.focals[v], width, height, np.linalg.inv(rig.cam_to_rig(v)))))
     return write_cameras(path, entries, units="arbitrary", extra={"rig": rig.info})
 
 
@@ -36,9 +36,10 @@ def read_rig(path: str | Path) -> Rig:
     cameras = read_cameras(path)
     entries = list(cameras.cameras.items())
     focals = np.array([[camera.K[0, 0], camera.K[1, 1]] for _, camera in entries])
-    if not np.allclose(focals, focals[0, 0], rtol=1e-6):
-        raise input_error(path, f"the cameras of a rig share one focal length; this file has {sorted(set(focals.ravel().round(3)))}")
     for name, camera in entries:
+        if not np.isclose(camera.K[0, 0], camera.K[1, 1], rtol=1e-6):
+            raise input_error(path, f"camera {name!r}: a rig camera has one focal length for both axes, not {camera.K[0, 0]:g} "
+                                    f"and {camera.K[1, 1]:g}")
         centre = [(camera.width - 1) / 2.0, (camera.height - 1) / 2.0]
         if not np.allclose(camera.K[:2, 2], centre, atol=1e-6):
             raise input_error(path, f"camera {name!r}: the principal point must be the image centre {centre}")
@@ -48,4 +49,4 @@ def read_rig(path: str | Path) -> Rig:
     info = read_json(path).get("rig", {})
     return Rig(tuple(name for name, _ in entries), tuple((camera.width, camera.height) for _, camera in entries),
                np.stack([pose[:3, :3] for pose in relative]), np.stack([pose[:3, 3] for pose in relative]),
-               float(focals[0, 0]), info if isinstance(info, dict) else {})
+               focals[:, 0].copy(), info if isinstance(info, dict) else {})

@@ -1,14 +1,15 @@
 """A fixed multi-camera rig (UWA's three cameras): calibrated from many captures, and captures aligned on it.
 
 A rig is fixed hardware: every capture it takes has the same relative camera poses and the same
-focal length; only the finger (its position, roll and shape) changes. One capture determines the
+focal lengths; only the finger (its position, roll and shape) changes. One capture determines the
 turn between its cameras only weakly (three near-orthographic views; README "Measurements"), but
 the rig's poses are shared by all captures, so pooling their correspondences determines them far
 better. The model:
 
 * the rig frame is camera 0's (landscape) frame; camera ``v`` has a rotation ``R_v`` (cam -> rig,
   ``R_0 = I``) and a centre ``c_v`` in *rig units* (camera 0's median depth of the finger = 1 in
-  the first capture); one focal length for all cameras;
+  the first capture); each camera its own focal length ``f_v`` (from three captures on; one for all
+  cameras with fewer, or when asked: :data:`PER_CAMERA_FOCAL_MIN_CAPTURES`);
 * capture ``k`` sees the rig scaled by its own ``s_k`` (the finger sits nearer or farther), and
   keeps its own per-view depth surfaces (relief, fields) of
   :class:`~fingersplat3d.align.alignment_problem.AlignmentProblem`, whose loss it contributes;
@@ -53,6 +54,13 @@ __all__ = ["Rig", "RigCapture", "RigCalibration", "calibrate_rig", "rig_align", 
 OUTLIER_RATIO = 3.0
 """A capture whose residual exceeds this multiple of the median capture's is left out of the rig."""
 
+PER_CAMERA_FOCAL_MIN_CAPTURES = 3
+"""Each camera its own focal from this many captures on; fewer fit one for all. Real UWA rig (docs/measurements.md,
+"Each camera its own focal"): the front camera fits a focal 6-7 % shorter than the side cameras' from either finger
+alone (4 and 5 captures) and from every eight of the nine, and a left-out frame's ridges are predicted better on 8 of
+9 captures; synthetic (one true focal): the cameras' focals within 1-2 % of each other from three captures or more,
+the rotations as with one focal, but from two captures 2.5 % apart and up to 0.14 degrees worse."""
+
 
 def quarter_turn(turns: int) -> np.ndarray:
     """Rotation by ``turns * 90`` degrees about the optical (z) axis of a camera frame."""
@@ -72,14 +80,29 @@ def robust_rotation_mean(rotations: Sequence[np.ndarray], floor_deg: float = 0.2
 
 @dataclass(frozen=True, eq=False)
 class Rig:
-    """Camera poses in the rig frame, their image sizes (landscape as the rig holds them) and one focal."""
+    """Camera poses in the rig frame, their image sizes (landscape as the rig holds them) and their focal lengths."""
 
     names: tuple[str, ...]
     sizes: tuple[tuple[int, int], ...]  # (width, height) per camera
     rotations: np.ndarray  # [V, 3, 3] cam -> rig, camera 0 the identity
     centers: np.ndarray  # [V, 3] camera centres, rig units, camera 0 at the origin
-    focal: float
+    focals: np.ndarray
+    """[V] each camera's focal length (pixels); one number is every camera's."""
     info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        focals = np.broadcast_to(np.asarray(self.focals, np.float64), (len(self.names),)).copy()
+        object.__setattr__(self, "focals", focals)
+
+    @property
+    def focal(self) -> float:
+        """The cameras' focal length: their geometric mean where each has its own."""
+        return float(np.exp(np.mean(np.log(self.focals))))
+
+    @property
+    def one_focal(self) -> bool:
+        """Whether every camera has the same focal length."""
+        return bool(np.allclose(self.focals, self.focals[0], rtol=1e-9))
 
     def cam_to_rig(self, camera: int) -> np.ndarray:
         pose = np.eye(4)
@@ -92,13 +115,13 @@ class Rig:
         first = np.linalg.inv(self.cam_to_rig(cameras[0]))
         poses = [first @ self.cam_to_rig(v) for v in cameras]
         return replace(self, names=tuple(self.names[v] for v in cameras), sizes=tuple(self.sizes[v] for v in cameras),
-                       rotations=np.stack([pose[:3, :3] for pose in poses]), centers=np.stack([pose[:3, 3] for pose in poses]))
+                       focals=self.focals[cameras], rotations=np.stack([pose[:3, :3] for pose in poses]), centers=np.stack([pose[:3, 3] for pose in poses]))
 
     def scaled(self, factor: float) -> "Rig":
         """The same rig for its photos resized by ``factor`` (the working resolution): sizes and focal in its pixels."""
         if factor == 1.0:
             return self
-        return replace(self, sizes=tuple(scaled_size(size, factor) for size in self.sizes), focal=self.focal * factor)
+        return replace(self, sizes=tuple(scaled_size(size, factor) for size in self.sizes), focals=self.focals * factor)
 
     def turns_for(self, camera: int, size: tuple[int, int]) -> tuple[int, ...]:
         """Quarter turns a view of ``size`` may be rotated by against camera ``camera``: (0,) or (1, 3) for a portrait one."""
@@ -145,7 +168,7 @@ class RigProblem(torch.nn.Module):
     """Captures of one rig: shared poses and focal, a scale per capture, each capture's own surfaces."""
 
     def __init__(self, problems, rig: Rig, turns: Sequence[Sequence[int]], log_capture_scales: Sequence[float],
-                 fixed_rig: bool) -> None:
+                 fixed_rig: bool, per_camera: bool = False) -> None:
         super().__init__()
         dtype = torch.float64
         self.problems = torch.nn.ModuleList(problems)
@@ -158,7 +181,8 @@ class RigProblem(torch.nn.Module):
                                                       dtype=dtype))  # [K, V, 3, 3]: Q^T per capture view
         self.omega = torch.nn.Parameter(torch.zeros((len(rig.names), 3), dtype=dtype), requires_grad=not fixed_rig)
         self.center = torch.nn.Parameter(torch.as_tensor(rig.centers, dtype=dtype).clone(), requires_grad=not fixed_rig)
-        self.log_focal = torch.nn.Parameter(torch.tensor(float(np.log(rig.focal)), dtype=dtype), requires_grad=not fixed_rig)
+        log_focal = np.log(rig.focals) if per_camera else np.log(rig.focal)  # [V] or one for all
+        self.log_focal = torch.nn.Parameter(torch.as_tensor(log_focal, dtype=dtype).clone(), requires_grad=not fixed_rig)
         self.log_capture_scale = torch.nn.Parameter(torch.as_tensor(np.asarray(log_capture_scales), dtype=dtype).clone())
         # the rig's unit is the first capture's (a free rig and free capture scales would trade)
         scale_free = np.ones(len(problems)) if fixed_rig else np.r_[0.0, np.ones(len(problems) - 1)]
@@ -182,7 +206,7 @@ class RigProblem(torch.nn.Module):
     def rig(self, template: Rig, info: dict) -> Rig:
         with torch.no_grad():
             return replace(template, rotations=self.rig_rotations().numpy(), centers=self.rig_centers().numpy(),
-                           focal=float(torch.exp(self.log_focal)), info=info)
+                           focals=torch.exp(self.log_focal).numpy(), info=info)
 
 
 def _median_depths(depths: Sequence[np.ndarray]) -> np.ndarray:
@@ -190,7 +214,7 @@ def _median_depths(depths: Sequence[np.ndarray]) -> np.ndarray:
 
 
 def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config: GlobalAlignConfig,
-                     previous: GlobalAlignment | None):
+                     previous: GlobalAlignment | None, per_camera: bool = False):
     """One capture's problem with root view 0, its surfaces started from ``previous`` (or the pointmaps)."""
     depths = capture.depths
     n_views = len(depths)
@@ -208,18 +232,19 @@ def _capture_problem(capture: RigCapture, rig: Rig, turns: Sequence[int], config
         relative, alphas, fields = np.ones(n_views), np.zeros(n_views), [np.zeros(g.size) for g in grids]
     log_scales = np.log(relative / medians)
     rotations = np.stack([rig.rotations[v] @ quarter_turn(turns[v]).T for v in range(n_views)])
-    initial = InitialState(rotations, rig.centers.copy(), log_scales, alphas, np.full(n_views, np.log(rig.focal)), fields)
+    initial = InitialState(rotations, rig.centers.copy(), log_scales, alphas, np.log(rig.focals), fields)
     guesses = np.broadcast_to(np.asarray(capture.focal_guesses, np.float64), (n_views,)).copy()
     # The rig holds the poses (camera centres, chained onto its own unknowns): no pivot.
     problem, data = alignment_problem(depths, guesses, list(capture.correspondences) + list(capture.contours),
-                                      replace(config, pivot_poses=False), grids, initial, aligned, root)
+                                      replace(config, pivot_poses=False, shared_focal=not per_camera), grids, initial,
+                                      aligned, root)
     return problem, data, grids, tree, aligned
 
 
 def _solve(captures: Sequence[RigCapture], rig: Rig, turns, config: GlobalAlignConfig, fixed_rig: bool,
-           previous: Sequence[GlobalAlignment | None]):
-    built = [_capture_problem(c, rig, t, config, p) for c, t, p in zip(captures, turns, previous)]
-    problem = RigProblem([b[0] for b in built], rig, turns, np.zeros(len(captures)), fixed_rig)
+           previous: Sequence[GlobalAlignment | None], per_camera: bool = False):
+    built = [_capture_problem(c, rig, t, config, p, per_camera) for c, t, p in zip(captures, turns, previous)]
+    problem = RigProblem([b[0] for b in built], rig, turns, np.zeros(len(captures)), fixed_rig, per_camera)
     with single_threaded():
         if config.solver == "lm":
             history = levenberg_marquardt_rig(problem, config.lm_iterations, fixed_rig=fixed_rig)
@@ -270,17 +295,18 @@ def _initial_rig(captures: Sequence[RigCapture], names: Sequence[str]) -> tuple[
         unit = float(np.nanmedian(capture.alignment.depths[0]))
         centers.append([land0.T @ (capture.alignment.cam_to_world[v][:3, 3] - pose0[:3, 3]) / unit for v in range(n_views)])
     focal = float(np.median([c.alignment.focals[0] for c in captures]))
-    return replace(template, rotations=rotations, centers=np.median(np.asarray(centers), axis=0), focal=focal), turns
+    return replace(template, rotations=rotations, centers=np.median(np.asarray(centers), axis=0), focals=focal), turns
 
 
 # ------------------------------------------------------------------------------------------- API
 
 def calibrate_rig(captures: Sequence[RigCapture], names: Sequence[str],
-                  config: GlobalAlignConfig = GlobalAlignConfig()) -> RigCalibration:
+                  config: GlobalAlignConfig = GlobalAlignConfig(), per_camera_focal: bool = True) -> RigCalibration:
     """The rig that best explains every capture's correspondences (see the module docstring).
 
     ``captures``: registered captures with all views aligned, at least 2; their views are the
-    rig's cameras in order.
+    rig's cameras in order. ``per_camera_focal``: each camera its own focal length, from
+    :data:`PER_CAMERA_FOCAL_MIN_CAPTURES` captures on (fewer fit one for all cameras).
     """
     captures = [c for c in captures if all(c.alignment.aligned)]
     if len({c.name for c in captures}) < len(captures):  # names key the report: make them unique
@@ -292,8 +318,9 @@ def calibrate_rig(captures: Sequence[RigCapture], names: Sequence[str],
     used = list(range(len(captures)))
     for attempt in range(3):
         chosen = [captures[k] for k in used]
+        per_camera = per_camera_focal and len(chosen) >= PER_CAMERA_FOCAL_MIN_CAPTURES
         problem, alignments, _ = _solve(chosen, rig, [turns[k] for k in used], config, fixed_rig=False,
-                                        previous=[c.alignment for c in chosen])
+                                        previous=[c.alignment for c in chosen], per_camera=per_camera)
         residuals = np.array([a.residual_px for a in alignments])
         limit = OUTLIER_RATIO * float(np.median(residuals))
         outliers = [k for k, r in zip(used, residuals) if not r <= limit]
@@ -303,7 +330,8 @@ def calibrate_rig(captures: Sequence[RigCapture], names: Sequence[str],
             left_out[captures[k].name] = f"residual {residuals[used.index(k)]:.2f} px, over {OUTLIER_RATIO:g}x the median"
         used = [k for k in used if k not in outliers]
     names_used = [captures[k].name for k in used]
-    info = {"captures": names_used, "left_out": left_out, "turns": {captures[k].name: list(turns[k]) for k in used},
+    info = {"captures": names_used, "left_out": left_out, "focal": "each camera its own" if per_camera else "one for all",
+            "turns": {captures[k].name: list(turns[k]) for k in used},
             "residual_px": {captures[k].name: round(float(a.residual_px), 3) for k, a in zip(used, alignments)}}
     rig = problem.rig(rig, info)
     return RigCalibration(rig, names_used, left_out, info["residual_px"], dict(zip(names_used, alignments)))
@@ -324,7 +352,8 @@ def rig_align(depths: Sequence[np.ndarray], focal_guess, pairs: Sequence[PairCor
     capture = RigCapture("capture", list(depths), guesses, list(pairs), previous, list(sizes), contours=list(contours))
     best = None
     for turns in itertools.product(*[rig.turns_for(v, tuple(size)) for v, size in enumerate(sizes)]):
-        _, (alignment,), loss = _solve([capture], rig, [turns], config, fixed_rig=True, previous=[previous])
+        _, (alignment,), loss = _solve([capture], rig, [turns], config, fixed_rig=True, previous=[previous],
+                                       per_camera=not rig.one_focal)
         if best is None or loss < best[0]:
             best = (loss, alignment)
     return best[1]

@@ -35,14 +35,14 @@ def _sync(rig_problem) -> None:
             problem.base_rotation.copy_(rotations @ rig_problem.turns[k])
             problem.omega.zero_()
             problem.translation.copy_(cameras[1])
-            problem.log_focal.fill_(float(focal))
+            problem.log_focal.copy_(focal.expand_as(problem.log_focal))
 
 
 def _layout(rig_problem) -> tuple[int, list[int], int]:
     """Columns: rig omega ``3V``, rig centres ``3V``, rig log focal, capture scales ``K``, then each capture's own
     unknowns (log scales, log relief, fields); returns the start of the capture blocks, their starts and the size."""
     views, captures = rig_problem.base_rotation.shape[0], len(rig_problem.problems)
-    first = start = 6 * views + 1 + captures
+    first = start = 6 * views + rig_problem.log_focal.numel() + captures
     starts = []
     for problem in rig_problem.problems:
         starts.append(start)
@@ -65,9 +65,10 @@ def _chain(rig_problem, k: int, own_start: int, size: int, fixed_rig: bool) -> s
         rows += list(range(3 * views, 6 * views))  # translations: the rig centres, times the capture's scale
         cols += list(range(3 * views, 6 * views))
         vals += [scale] * (3 * views)
+    focals = rig_problem.log_focal.numel()
     if float(rig_problem.scale_free[k]) > 0:
         rows += list(range(3 * views, 6 * views))
-        cols += [6 * views + 1 + k] * (3 * views)
+        cols += [6 * views + focals + k] * (3 * views)
         vals += translation.reshape(-1).tolist()
     at = problem._layout()
     own = [np.arange(at["log_scale"], at["log_focal"]), np.arange(at["field"], local)]
@@ -75,10 +76,11 @@ def _chain(rig_problem, k: int, own_start: int, size: int, fixed_rig: bool) -> s
     rows += own.tolist()
     cols += (own_start + np.arange(own.size)).tolist()
     vals += [1.0] * own.size
-    if not fixed_rig:
-        rows.append(at["log_focal"])
-        cols.append(6 * views)
-        vals.append(1.0)
+    if not fixed_rig:  # one focal for every camera, or one each
+        own_focals = problem.log_focal.numel()
+        rows += list(range(at["log_focal"], at["log_focal"] + own_focals))
+        cols += [6 * views + (i if focals > 1 else 0) for i in range(own_focals)]
+        vals += [1.0] * own_focals
     return sparse.csr_matrix((vals, (rows, cols)), shape=(local, size))
 
 
@@ -99,15 +101,15 @@ def _restore(rig_problem, state) -> None:
 
 def _apply(rig_problem, start_state, step: np.ndarray, fixed_rig: bool, starts: list[int]) -> None:
     _restore(rig_problem, start_state)
-    views = rig_problem.base_rotation.shape[0]
+    views, focals = rig_problem.base_rotation.shape[0], rig_problem.log_focal.numel()
     free = rig_problem.free.numpy()[:, None]
     with torch.no_grad():
         if not fixed_rig:
             turn = torch.as_tensor(step[:3 * views].reshape(views, 3) * free)
             rig_problem.base_rotation.copy_(axis_angle_to_matrix(turn) @ rig_problem.base_rotation)
             rig_problem.center.add_(torch.as_tensor(step[3 * views:6 * views].reshape(views, 3) * free))
-            rig_problem.log_focal.add_(float(step[6 * views]))
-        scales = step[6 * views + 1:6 * views + 1 + len(rig_problem.problems)] * rig_problem.scale_free.numpy()
+            rig_problem.log_focal.add_(torch.as_tensor(step[6 * views:6 * views + focals]).reshape(rig_problem.log_focal.shape))
+        scales = step[6 * views + focals:6 * views + focals + len(rig_problem.problems)] * rig_problem.scale_free.numpy()
         rig_problem.log_capture_scale.add_(torch.as_tensor(scales))
         for problem, values, begin in zip(rig_problem.problems, start_state[4:], starts):
             at = problem._layout()
