@@ -115,10 +115,11 @@ class Rig:
         first = np.linalg.inv(self.cam_to_rig(cameras[0]))
         poses = [first @ self.cam_to_rig(v) for v in cameras]
         return replace(self, names=tuple(self.names[v] for v in cameras), sizes=tuple(self.sizes[v] for v in cameras),
-                       focals=self.focals[cameras], rotations=np.stack([pose[:3, :3] for pose in poses]), centers=np.stack([pose[:3, 3] for pose in poses]))
+                       focals=self.focals[cameras], rotations=np.stack([pose[:3, :3] for pose in poses]),
+                       centers=np.stack([pose[:3, 3] for pose in poses]))
 
     def scaled(self, factor: float) -> "Rig":
-        """The same rig for its photos resized by ``factor`` (the working resolution): sizes and focal in its pixels."""
+        """The same rig for its photos resized by ``factor`` (the working resolution): sizes and focals in its pixels."""
         if factor == 1.0:
             return self
         return replace(self, sizes=tuple(scaled_size(size, factor) for size in self.sizes), focals=self.focals * factor)
@@ -165,7 +166,8 @@ class RigCalibration:
 # ------------------------------------------------------------------------------------------ model
 
 class RigProblem(torch.nn.Module):
-    """Captures of one rig: shared poses and focal, a scale per capture, each capture's own surfaces."""
+    """Captures of one rig: shared poses and focal lengths (one, or one per camera with ``per_camera``), a scale per
+    capture, each capture's own surfaces."""
 
     def __init__(self, problems, rig: Rig, turns: Sequence[Sequence[int]], log_capture_scales: Sequence[float],
                  fixed_rig: bool, per_camera: bool = False) -> None:

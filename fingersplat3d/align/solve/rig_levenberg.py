@@ -2,13 +2,13 @@
 
 A :class:`~fingersplat3d.align.solve.rig.RigProblem` holds K capture problems whose cameras come
 from one rig: camera ``v`` of capture ``k`` has rotation ``R_v Q_kv`` (``Q`` a quarter turn for a
-portrait view), centre ``c_v exp(s_k)`` and the rig's focal. Each capture's sparse Jacobian
+portrait view), centre ``c_v exp(s_k)`` and the rig's focal (one, or camera ``v``'s own). Each capture's sparse Jacobian
 (:func:`~fingersplat3d.align.solve.levenberg._system`, over its own poses, focal and surfaces) is
 taken with its cameras set to the rig's current ones and its rotation updates at zero, so that a
 capture's rotation column *is* a left update ``exp(w) R_v`` of the rig's camera ``v``; a capture's
 translation column becomes the rig centre's (times ``exp(s_k)``) and its scale's (times the
-translation); its focal column the rig's. Stacked, these make one sparse system over the rig's
-``6V + 1`` unknowns, the K capture scales and every capture's surfaces, solved as the single-capture
+translation); its focal columns the rig's. Stacked, these make one sparse system over the rig's
+``6V + 1`` (or ``7V``) unknowns, the K capture scales and every capture's surfaces, solved as the single-capture
 solver solves its own (damped Gauss-Newton, a step kept only where the true loss falls).
 
 Why: the joint fit had been L-BFGS, which stops far from the optimum of these badly conditioned
@@ -39,7 +39,7 @@ def _sync(rig_problem) -> None:
 
 
 def _layout(rig_problem) -> tuple[int, list[int], int]:
-    """Columns: rig omega ``3V``, rig centres ``3V``, rig log focal, capture scales ``K``, then each capture's own
+    """Columns: rig omega ``3V``, rig centres ``3V``, rig log focal (1 or ``V``), capture scales ``K``, then each capture's own
     unknowns (log scales, log relief, fields); returns the start of the capture blocks, their starts and the size."""
     views, captures = rig_problem.base_rotation.shape[0], len(rig_problem.problems)
     first = start = 6 * views + rig_problem.log_focal.numel() + captures
