@@ -98,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     angles = ", ".join(f"{rig.names[i]}-{rig.names[j]} {rotation_angle_deg(rig.rotations[i], rig.rotations[j]):.2f} deg"
                        for i in range(len(rig.names)) for j in range(i + 1, len(rig.names)))
     focals = (f"focal {rig.focal:.1f} px" if rig.one_focal else
-              "focals " + ", ".join(f"{name} {focal:.1f}" for name, focal in zip(rig.names, rig.focals)) + " px")
+              "focals " + ", ".join(f"{name} {focal:.1f}" for name, focal in zip(rig.names, rig.focals))
+              + f" px (geometric mean {rig.focal:.1f})")
     print(f"wrote {args.output}: {len(calibration.used)} captures used ({len(calibration.left_out)} left out, "
           f"{len(failures)} not registered), {focals}, {angles}")
     return 0
