@@ -35,7 +35,6 @@ def read_rig(path: str | Path) -> Rig:
     path = Path(path)
     cameras = read_cameras(path)
     entries = list(cameras.cameras.items())
-    focals = np.array([[camera.K[0, 0], camera.K[1, 1]] for _, camera in entries])
     for name, camera in entries:
         if not np.isclose(camera.K[0, 0], camera.K[1, 1], rtol=1e-6):
             raise input_error(path, f"camera {name!r}: a rig camera has one focal length for both axes, not {camera.K[0, 0]:g} "
@@ -49,4 +48,4 @@ def read_rig(path: str | Path) -> Rig:
     info = read_json(path).get("rig", {})
     return Rig(tuple(name for name, _ in entries), tuple((camera.width, camera.height) for _, camera in entries),
                np.stack([pose[:3, :3] for pose in relative]), np.stack([pose[:3, 3] for pose in relative]),
-               focals[:, 0].copy(), info if isinstance(info, dict) else {})
+               [camera.K[0, 0] for _, camera in entries], info if isinstance(info, dict) else {})
