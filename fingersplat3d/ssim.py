@@ -14,10 +14,12 @@ Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors. Pur
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 import torch.nn.functional as F
 
-__all__ = ["ssim_map", "image_pair", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
+__all__ = ["ssim_map", "ssim_reference", "SSIMReference", "image_pair", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
 
 SSIM_WINDOW = 11
 SSIM_SIGMA = 1.5
@@ -73,24 +75,66 @@ class _Blur(torch.autograd.Function):
         return grad_stack, None, None
 
 
-def ssim_map(render: torch.Tensor, target: torch.Tensor, *, padding: str = "zeros") -> torch.Tensor:
-    """Per-pixel SSIM ``[H, W, C]`` of two images of one shape; ``padding``: ``zeros`` or ``reflect``."""
-    if padding not in ("zeros", "reflect"):
-        raise ValueError(f"padding must be 'zeros' or 'reflect', got {padding!r}")
-    render, target = image_pair(render, target)
-    channels = render.shape[-1]
-    x = render.permute(2, 0, 1)[None]  # [1, C, H, W]
-    y = target.permute(2, 0, 1)[None]
-    pad = SSIM_WINDOW // 2
+@dataclass(frozen=True, eq=False)
+class SSIMReference:
+    """A fixed image's side of SSIM, made once: the image ``[1, C, H, W]`` (padded as ``padding`` asks) and its blurred
+    mean and second moment. A fit compares every render of a view with one photo: its two blurs need not be redone for
+    each step, nor their adjoints (two fifths of SSIM's blurring either way); the map is the same to the bit."""
+
+    image: torch.Tensor
+    mean: torch.Tensor
+    square: torch.Tensor
+    padding: str
+    shape: tuple[int, ...]
+    """The image's ``[H, W, C]``."""
+
+
+def _taps() -> tuple[float, ...]:
     taps = torch.arange(SSIM_WINDOW, dtype=torch.float64) - (SSIM_WINDOW - 1) / 2.0
     g = torch.exp(-(taps * taps) / (2.0 * SSIM_SIGMA * SSIM_SIGMA))
-    g = g / g.sum()
-    stack = torch.cat([x, y, x * x, y * y, x * y], dim=1)  # [1, 5C, H, W]
+    return tuple((g / g.sum()).tolist())
+
+
+def _blurred(stack: torch.Tensor, padding: str) -> torch.Tensor:
+    """The window over ``stack`` ``[1, K, H, W]`` -> ``[1, K, H, W]``, its borders as ``padding`` says."""
+    pad = SSIM_WINDOW // 2
     if padding == "reflect":
-        stack = F.pad(stack, (pad, pad, pad, pad), mode="reflect")
-        pad = 0
-    blurred = _Blur.apply(stack, tuple(g.tolist()), pad)
-    mu_x, mu_y, e_xx, e_yy, e_xy = blurred.split(channels, dim=1)
+        return _Blur.apply(F.pad(stack, (pad, pad, pad, pad), mode="reflect"), _taps(), 0)
+    return _Blur.apply(stack, _taps(), pad)
+
+
+def _check_padding(padding: str) -> None:
+    if padding not in ("zeros", "reflect"):
+        raise ValueError(f"padding must be 'zeros' or 'reflect', got {padding!r}")
+
+
+def ssim_reference(target: torch.Tensor, *, padding: str = "zeros") -> SSIMReference:
+    """``target``'s side of :func:`ssim_map` (``[H, W]`` or ``[H, W, C]``), for comparing many renders with it."""
+    _check_padding(padding)
+    target = _as_hwc(target, "target")
+    y = target.permute(2, 0, 1)[None]  # [1, C, H, W]
+    mean, square = _blurred(torch.cat([y, y * y], dim=1), padding).split(target.shape[-1], dim=1)
+    return SSIMReference(y, mean, square, padding, tuple(target.shape))
+
+
+def ssim_map(render: torch.Tensor, target: torch.Tensor | SSIMReference, *, padding: str | None = None) -> torch.Tensor:
+    """Per-pixel SSIM ``[H, W, C]`` of two images of one shape; ``padding``: ``zeros`` (the default) or ``reflect``.
+    ``target`` may be made once by :func:`ssim_reference`, which holds its padding."""
+    if isinstance(target, SSIMReference):
+        if padding is not None and padding != target.padding:
+            raise ValueError(f"padding {padding!r} asked of a reference made with {target.padding!r}")
+        render = _as_hwc(render, "render")
+        if tuple(render.shape) != target.shape:
+            raise ValueError(f"render {tuple(render.shape)} and target {target.shape} differ in shape")
+        reference = target
+    else:
+        render, target = image_pair(render, target)
+        reference = ssim_reference(target, padding=padding or "zeros")
+    channels = render.shape[-1]
+    x = render.permute(2, 0, 1)[None]  # [1, C, H, W]
+    y = reference.image.to(dtype=x.dtype, device=x.device)
+    mu_x, e_xx, e_xy = _blurred(torch.cat([x, x * x, x * y], dim=1), reference.padding).split(channels, dim=1)
+    mu_y, e_yy = reference.mean.to(x), reference.square.to(x)
     mu_xx, mu_yy, mu_xy = mu_x * mu_x, mu_y * mu_y, mu_x * mu_y
     numerator = (2.0 * mu_xy + SSIM_C1) * (2.0 * (e_xy - mu_xy) + SSIM_C2)
     denominator = (mu_xx + mu_yy + SSIM_C1) * ((e_xx - mu_xx) + (e_yy - mu_yy) + SSIM_C2)

@@ -137,3 +137,34 @@ def test_dssim_decreases_with_noise_level_and_bad_input():
         masked_l1(clean, clean, torch.ones(3, 3, dtype=torch.bool))
     with pytest.raises(ValueError):
         photometric_loss(clean, clean, lambda_dssim=1.5)
+
+
+@pytest.mark.parametrize("masked", [True, False])
+def test_prepared_target_gives_the_same_loss_and_gradient_to_the_bit(masked):
+    """A target prepared once (what a fit does for each view) changes nothing: loss and gradient are identical."""
+    from fingersplat3d.splat.losses import photometric_target
+
+    target = random_image(1, (30, 26, 1), torch.float32)
+    mask = interior_mask(30, 26, 7) if masked else None
+    grads = []
+    for prepared in (False, True):
+        render = random_image(2, (30, 26, 1), torch.float32).requires_grad_(True)
+        loss = (photometric_loss(render, photometric_target(target, mask)) if prepared
+                else photometric_loss(render, target, mask))
+        loss.backward()
+        grads.append((loss.detach(), render.grad))
+    assert torch.equal(grads[0][0], grads[1][0]) and torch.equal(grads[0][1], grads[1][1])
+    with pytest.raises(ValueError, match="holds its own mask"):
+        photometric_loss(render, photometric_target(target, mask), interior_mask(30, 26))
+    with pytest.raises(ValueError, match="differ in shape"):
+        photometric_loss(random_image(3, (30, 25, 1)), photometric_target(target, mask))
+
+
+def test_ssim_reference_keeps_its_padding():
+    from fingersplat3d.ssim import ssim_reference
+
+    x, y = random_image(4, (20, 20, 1)), random_image(5, (20, 20, 1))
+    for padding in ("zeros", "reflect"):
+        assert torch.equal(ssim_map(x, ssim_reference(y, padding=padding)), ssim_map(x, y, padding=padding))
+    with pytest.raises(ValueError, match="asked of a reference"):
+        ssim_map(x, ssim_reference(y, padding="reflect"), padding="zeros")

@@ -25,7 +25,7 @@ from ..scene import Camera, View
 from .adam import Adam
 from .config import SplatConfig
 from .gaussians import Gaussians, sh_to_rgb
-from .losses import photometric_loss
+from .losses import PhotometricTarget, photometric_loss, photometric_target
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
 from .shading import facing_cosines, shade
@@ -67,6 +67,8 @@ class FitTarget:
     depth_valid: torch.Tensor | None = None  # [H, W] bool: mask & finite prior depth
     outside_weight: torch.Tensor | None = None  # [H, W] float: 1 / (pixels off the finger) off it, 0 on it
     depth_weight: torch.Tensor | None = None  # [H, W] float: 1 / (valid pixels * the prior's median) where depth_valid
+    photometric: PhotometricTarget | None = None
+    """The image and mask as :func:`~fingersplat3d.splat.losses.photometric_loss` reads them, prepared once."""
 
     @classmethod
     def from_view(cls, view: View, camera: Camera, device: torch.device, depth: np.ndarray | None = None) -> "FitTarget":
@@ -81,8 +83,9 @@ class FitTarget:
             prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
             depth_weight = as_tensor(valid_np / (valid_np.sum() * scale))
         outside = ~np.asarray(mask, bool)
-        return cls(as_tensor(image), as_tensor(mask, torch.bool), as_tensor(camera.K), as_tensor(camera.world_to_cam),
-                   view.width, view.height, prior, valid, as_tensor(outside / max(int(outside.sum()), 1)), depth_weight)
+        image, mask = as_tensor(image), as_tensor(mask, torch.bool)
+        return cls(image, mask, as_tensor(camera.K), as_tensor(camera.world_to_cam), view.width, view.height, prior,
+                   valid, as_tensor(outside / max(int(outside.sum()), 1)), depth_weight, photometric_target(image, mask))
 
 
 @dataclass(frozen=True, eq=False)
@@ -269,7 +272,7 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
             pose = apply_pose_correction(pose, rotation[v] * turn_scales[v], translation[v])
         out = _render(current, pose, target.K, target.width, target.height, nears[v], backend=config.rasterizer)
         out.means2d.retain_grad()
-        loss = photometric_loss(out.color, target.image, target.mask, config.lambda_dssim)
+        loss = photometric_loss(out.color, target.photometric, None, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
             loss = loss + config.lambda_silhouette * (out.alpha * target.outside_weight).sum()
         if target.depth is not None:  # stay near the aligned geometry: photos alone under-constrain depth
@@ -319,7 +322,7 @@ def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np
     extent = scene_extent(model.means)
     near = near_plane(model.means, camera, near_fraction)
     sigma = camera.width / 160.0 if blur_px is None else blur_px
-    blurred_target = _blur(target.image, sigma)
+    blurred_target = photometric_target(_blur(target.image, sigma), target.mask)
     rotation = torch.zeros(3, device=device, requires_grad=True)
     translation = torch.zeros(3, device=device, requires_grad=True)
     optimizer = Adam([{"params": [rotation], "lr": lr_rotation, "name": "pose_rotation"},
@@ -329,12 +332,12 @@ def fit_camera(gaussians: Gaussians, camera: Camera, image: np.ndarray, mask: np
         pose = apply_pose_correction(target.world_to_cam, rotation * turn_scale, translation)
         out = render_camera(model, camera, near, world_to_cam=pose)
         coarse = step < iterations // 2 and sigma > 0
-        sharp = photometric_loss(out.color, target.image, target.mask, lambda_dssim) if not coarse or step == 0 else None
+        sharp = photometric_loss(out.color, target.photometric, None, lambda_dssim) if not coarse or step == 0 else None
         if sharp is not None and float(sharp.detach()) < best_loss:  # the start, then every sharp step: keep the best
             best_loss, best = float(sharp.detach()), (rotation.detach().clone(), translation.detach().clone())
         if step == iterations:
             break
-        loss = photometric_loss(_blur(out.color, sigma), blurred_target, target.mask, lambda_dssim) if coarse else sharp
+        loss = photometric_loss(_blur(out.color, sigma), blurred_target, None, lambda_dssim) if coarse else sharp
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()

@@ -11,11 +11,14 @@ Pure math: no Open3D, no files.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
-from ..ssim import SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW, image_pair, ssim_map
+from ..ssim import SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW, SSIMReference, image_pair, ssim_map, ssim_reference
 
-__all__ = ["ssim_map", "ssim", "masked_l1", "photometric_loss", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
+__all__ = ["ssim_map", "ssim", "masked_l1", "photometric_loss", "PhotometricTarget", "photometric_target", "SSIM_WINDOW",
+           "SSIM_SIGMA", "SSIM_C1", "SSIM_C2"]
 
 
 def _mask_weights(mask: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor | None:
@@ -37,17 +40,38 @@ def _masked_mean(values: torch.Tensor, weights: torch.Tensor | None) -> torch.Te
     return total / count.clamp_min(1.0)
 
 
-def _crop_to_mask(render: torch.Tensor, target: torch.Tensor, weights: torch.Tensor | None, halo: int):
+def _mask_window(weights: torch.Tensor | None, halo: int) -> tuple[slice, slice]:
     """The window of the images that the masked SSIM mean depends on: the mask's bounding box grown
     by the filter's half-width (exact: pixels farther out never reach a masked pixel's window)."""
+    whole = (slice(None), slice(None))
     if weights is None:
-        return render, target, weights
+        return whole
     rows, cols = torch.nonzero(weights.sum(1)), torch.nonzero(weights.sum(0))
     if len(rows) == 0:
-        return render, target, weights
+        return whole
     top, bottom = max(0, int(rows[0]) - halo), int(rows[-1]) + halo + 1
     left, right = max(0, int(cols[0]) - halo), int(cols[-1]) + halo + 1
-    return render[top:bottom, left:right], target[top:bottom, left:right], weights[top:bottom, left:right]
+    return slice(top, bottom), slice(left, right)
+
+
+@dataclass(frozen=True, eq=False)
+class PhotometricTarget:
+    """A target image and its mask prepared once for :func:`photometric_loss` (a fit compares each view's photo with a
+    render at every step): its mask weights, the window its SSIM mean reads and the photo's side of that SSIM."""
+
+    image: torch.Tensor  # [H, W, C]
+    weights: torch.Tensor | None  # [H, W] float, None: the whole image
+    window: tuple[slice, slice]
+    reference: SSIMReference  # of image[window]
+
+
+def photometric_target(target: torch.Tensor, mask: torch.Tensor | None = None) -> PhotometricTarget:
+    """``target`` ``[H, W]`` or ``[H, W, C]`` with its ``mask`` (None: the whole image), ready for many
+    :func:`photometric_loss` calls."""
+    image, _ = image_pair(target, target)
+    weights = _mask_weights(mask, image)
+    window = _mask_window(weights, SSIM_WINDOW // 2)
+    return PhotometricTarget(image, weights, window, ssim_reference(image[window]))
 
 
 def ssim(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
@@ -62,20 +86,29 @@ def masked_l1(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | N
     return _masked_mean((render - target).abs(), _mask_weights(mask, render))
 
 
-def photometric_loss(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None,
+def photometric_loss(render: torch.Tensor, target: torch.Tensor | PhotometricTarget, mask: torch.Tensor | None = None,
                      lambda_dssim: float = 0.2) -> torch.Tensor:
     """``(1 - lambda) * L1 + lambda * (1 - SSIM)`` over the finger mask (the paper's loss, lambda 0.2).
 
-    ``render``/``target`` ``[H, W, C]``, ``mask`` ``[H, W]`` (None = whole image). An empty mask
+    ``render``/``target`` ``[H, W, C]``, ``mask`` ``[H, W]`` (None = whole image); or ``target`` made once by
+    :func:`photometric_target` with its mask (then ``mask`` is None), the same loss to the bit. An empty mask
     gives 0 (both terms vanish) with a zero, finite gradient.
     """
     if not 0.0 <= lambda_dssim <= 1.0:
         raise ValueError(f"lambda_dssim must be in [0, 1], got {lambda_dssim}")
-    render, target = image_pair(render, target)
-    weights = _mask_weights(mask, render)
-    l1 = _masked_mean((render - target).abs(), weights)
+    if isinstance(target, PhotometricTarget):
+        if mask is not None:
+            raise ValueError("a prepared photometric target holds its own mask")
+        prepared = target
+    else:
+        render, target = image_pair(render, target)
+        prepared = photometric_target(target, mask)
+    render, _ = image_pair(render, prepared.image)
+    image, weights = prepared.image, prepared.weights
+    l1 = _masked_mean((render - image).abs(), weights)
     if lambda_dssim == 0.0:
         return l1
-    render, target, weights = _crop_to_mask(render, target, weights, SSIM_WINDOW // 2)
-    structure = _masked_mean(1.0 - ssim_map(render, target), weights)
+    window = prepared.window
+    inside = None if weights is None else weights[window]
+    structure = _masked_mean(1.0 - ssim_map(render[window], prepared.reference), inside)
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * structure
