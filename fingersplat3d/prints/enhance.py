@@ -21,7 +21,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..align.correspond.texture import masked_blur
+from ..align.correspond.texture import masked_blur, structure_products
 
 __all__ = ["gabor_enhance", "ridge_coherence", "ORIENTATIONS", "SIGMA_ACROSS", "SIGMA_ALONG", "ORIENTATION_PERIODS"]
 
@@ -32,10 +32,9 @@ ORIENTATION_PERIODS = 1.5  # smoothing of the structure tensor, periods
 
 
 def _structure_tensor(texture: np.ndarray, weight: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(gxx, gyy, gxy)``: the texture's gradient products (Sobel), averaged over ``sigma`` pixels inside ``weight``."""
-    gx = cv2.Sobel(texture, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(texture, cv2.CV_32F, 0, 1, ksize=3)
-    return tuple(masked_blur(v, weight, sigma) for v in (gx * gx, gy * gy, gx * gy))
+    """``(gxx, gyy, gxy)``: the texture's structure tensor averaged over ``sigma`` pixels inside ``weight``."""
+    gxx, gxy, gyy = np.moveaxis(structure_products(texture, sigma, weight), -1, 0)
+    return gxx, gyy, gxy
 
 
 def _kernel(angle: float, period: float) -> np.ndarray:

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from ...device import cpu_threads, single_threaded
+from .texture import structure_products
 
 __all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_jacobian", "match_guided", "structure_information"]
 
@@ -85,10 +86,8 @@ def predict_with_jacobian(predictor: Predictor, uv: np.ndarray, step: float = 1.
 
 
 def _structure_products(texture: np.ndarray, half: int) -> np.ndarray:
-    """``[H, W, 3]`` the gradient products ``(uu, uv, vv)`` of ``texture``, each blurred by a Gaussian of ``half / 2``."""
-    grad_v, grad_u = np.gradient(np.asarray(texture, np.float32))
-    sigma = max(1.0, half / 2.0)
-    return np.stack([cv2.GaussianBlur(product, (0, 0), sigma) for product in (grad_u * grad_u, grad_u * grad_v, grad_v * grad_v)], -1)
+    """``[H, W, 3]`` the structure tensor of ``texture`` (float32) over a Gaussian of ``half / 2``."""
+    return structure_products(np.asarray(texture, np.float32), max(1.0, half / 2.0))
 
 
 def _sampled_information(products: np.ndarray, uv: np.ndarray) -> np.ndarray:
