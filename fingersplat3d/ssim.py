@@ -2,10 +2,12 @@
 
 An 11x11 Gaussian window (sigma 1.5), ``C1 = 0.01^2``, ``C2 = 0.03^2`` (data range 1), the
 population (not sample) covariance: the settings of the 3DGS training code and of Wang et al.'s
-reference. The window is separable, so the five blurred images are filtered in one batch along
+reference. The window is separable, so the blurred images are filtered in one batch along
 rows then columns (22 taps instead of 121; the 2D convolution's backward dominated a fitting
 step on the CPU), as shifted multiply-adds with a hand-written adjoint (the same blur: the window
-is symmetric). Borders: ``zeros`` pads with zeros as 3DGS training does; ``reflect`` mirrors the
+is symmetric). The target's two (its mean and second moment) can be made once
+(:func:`ssim_reference`) for a photo that many renders are compared with; the render's three
+(mean, second moment, product with the target) are then all a call blurs. Borders: ``zeros`` pads with zeros as 3DGS training does; ``reflect`` mirrors the
 image (without repeating the edge pixel), so that nothing outside the image counts, as an
 evaluation score should. ``tests/test_ssim.py`` checks it against scikit-image's
 ``structural_similarity`` with Wang et al.'s settings.
