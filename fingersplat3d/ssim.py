@@ -16,6 +16,7 @@ Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors. Pur
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import torch
@@ -91,7 +92,9 @@ class SSIMReference:
     """The image's ``[H, W, C]``."""
 
 
+@functools.cache
 def _taps() -> tuple[float, ...]:
+    """The window's 1D weights (made once: every SSIM call of a fit reads them)."""
     taps = torch.arange(SSIM_WINDOW, dtype=torch.float64) - (SSIM_WINDOW - 1) / 2.0
     g = torch.exp(-(taps * taps) / (2.0 * SSIM_SIGMA * SSIM_SIGMA))
     return tuple((g / g.sum()).tolist())

@@ -100,9 +100,8 @@ def photometric_loss(render: torch.Tensor, target: torch.Tensor | PhotometricTar
         if mask is not None:
             raise ValueError("a prepared photometric target holds its own mask")
         prepared = target
-    else:
-        render, target = image_pair(render, target)
-        prepared = photometric_target(target, mask)
+    else:  # the target on the render's dtype and device, as a prepared one would be
+        prepared = photometric_target(image_pair(render, target)[1], mask)
     render, _ = image_pair(render, prepared.image)
     image, weights = prepared.image, prepared.weights
     l1 = _masked_mean((render - image).abs(), weights)
