@@ -83,6 +83,7 @@ def _exif_capture(folder, views, focals):
     return load_any(paths)[0]
 
 
+@pytest.mark.slow
 def test_two_phone_like_photos_with_their_exif_focal_get_the_turn_right(tmp_path):
     """A close-up (focal 1.4x the long side) in two views: the turn follows the focal, which two views cannot fix; the
     focal the EXIF records fixes it (measured: 0.25 degrees off with it, 7.0 fitted)."""

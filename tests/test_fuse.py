@@ -340,7 +340,8 @@ def test_another_groups_crops_register_whole_or_cut_short(impose_dev, rows, tmp_
     assert max(_turn_errors_deg(poses, rolls)) < 1.0
 
 
-@pytest.mark.parametrize("rolls", [(-18, 0, 47), pytest.param((-18, 0, 48), marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("rolls", [(-18, 0, 47), (-18, 0, 48)])
 def test_a_close_pair_and_a_far_view_of_a_flat_finger_register(impose_dev, rolls):
     """Another group's flat finger at rolls -18 / 0 / 47: the close pair's ~2,000 first matches and the far view's ~80,
     through cylinder charts that compress the turn across a flat pad, had put the first alignment 10-20 degrees off and
@@ -356,6 +357,7 @@ def test_a_close_pair_and_a_far_view_of_a_flat_finger_register(impose_dev, rolls
     assert max(_turn_errors_deg(poses, rolls)) < 1.0
 
 
+@pytest.mark.slow
 def test_a_view_beside_two_views_from_one_place_registers_as_two_views_would(impose_dev):
     """Another group's renders at rolls -13 / 47 / 48: the last two see the finger from one place (1 degree apart), so
     for the bas-relief the capture is two views, and the silhouette contours, which three distinct views need, had
@@ -369,6 +371,7 @@ def test_a_view_beside_two_views_from_one_place_registers_as_two_views_would(imp
     assert max(_turn_errors_deg([camera.world_to_cam for camera in result.cameras], rolls)) < 2.0
 
 
+@pytest.mark.slow
 def test_photos_on_a_bright_background_are_fused(uwa):
     """Phone-style photos: the finger on a bright desk, no dark background (segment/any_background.py). Measured
     with seed 1: masks IoU 0.99, pair rotations 0.3-0.7 degrees off, depth 0.07-0.13 mm (dark: 0.07-0.16)."""

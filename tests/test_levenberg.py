@@ -72,6 +72,7 @@ def test_the_step_lowers_the_loss_and_recovers_the_rotations(capture):
     assert history[-1] < 0.5 * before
 
 
+@pytest.mark.slow
 def test_lm_and_lbfgs_agree_where_both_converge(capture):
     rng = np.random.default_rng(0)
     pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03)]

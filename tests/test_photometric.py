@@ -88,6 +88,7 @@ def test_surface_normals_of_a_tilted_plane_are_its_normal():
     assert not np.isfinite(got[2]).all()  # no depth at the sample itself: no normal
 
 
+@pytest.mark.slow
 def test_fuse_with_photometric_reports_the_ridge_agreement(tmp_path):
     import json
     from pathlib import Path

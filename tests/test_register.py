@@ -127,6 +127,7 @@ def test_a_pair_thinned_for_many_views_keeps_its_weight_and_spreads_evenly():
     assert _pair_correspondences(0, 1, matches, np.eye(4), cap=2000).weight.shape == (n,)
 
 
+@pytest.mark.slow
 def test_views_whose_votes_are_all_undecided_are_placed_by_agreement_through_the_model(uwa640, monkeypatch):
     """Every chart vote undecided (the ratio it must reach raised out of reach): with ``undecided_peaks`` off no view
     is placed but the root; on, each view is placed at the vote peak whose model its pair agrees with, and the turns
@@ -145,6 +146,7 @@ def test_views_whose_votes_are_all_undecided_are_placed_by_agreement_through_the
     assert np.max(relative_rotation_errors(result.alignment.world_to_cam, truth)) < 3.0
 
 
+@pytest.mark.slow
 def test_a_view_photographed_nearer_is_placed_at_another_zoom(uwa640):
     """One photo enlarged by 1.3 (taken nearer the finger, or zoomed): its ridges are a third larger than the others'
     and the chart votes' patches no longer correlate, so without ``undecided_zooms`` it is lost; with them its
