@@ -86,6 +86,18 @@ def test_lm_and_lbfgs_agree_where_both_converge(capture):
     assert lm.loss_history[-1] <= lbfgs.loss_history[-1] * 1.01
 
 
+def test_the_lbfgs_solver_lowers_the_loss_and_keeps_its_views_placed(capture):
+    """The ``lbfgs`` solver, a few iterations (the agreement with Levenberg-Marquardt at convergence is a slow test)."""
+    rng = np.random.default_rng(0)
+    pairs = [_exact_pair(capture, 0, 1, rng, tilt=0.03), _exact_pair(capture, 1, 2, rng, tilt=0.03)]
+    depths = [v.depth for v in capture.views]
+    result = global_align(depths, capture.views[0].camera.K[0, 0], pairs,
+                          GlobalAlignConfig(solver="lbfgs", iterations=20, polish_iterations=20))
+    history = result.loss_history
+    assert all(result.aligned) and np.isfinite(history).all() and history[-1] < history[0]
+    assert all(np.isfinite(pose).all() for pose in result.world_to_cam)
+
+
 def test_turn_uncertainty_is_symmetric_and_grows_with_the_noise(capture):
     from fingersplat3d.align.solve.levenberg import turn_uncertainty_deg
 

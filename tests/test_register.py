@@ -146,6 +146,34 @@ def test_views_whose_votes_are_all_undecided_are_placed_by_agreement_through_the
     assert np.max(relative_rotation_errors(result.alignment.world_to_cam, truth)) < 3.0
 
 
+def test_a_partner_unwrapped_at_another_zoom_votes_for_a_view_photographed_nearer(uwa640):
+    """The zoom retry's vote alone (the whole registration is the slow test below): one photo enlarged by 1.3, its
+    vote with the front view is undecided at the same step, and decisive near the true turn with the front view's
+    texture unwrapped at 0.8 of the step."""
+    import cv2
+
+    from fingersplat3d.align.correspond.chart import CylinderChart
+    from fingersplat3d.align.register import _candidate_shifts, _prepare
+    from fingersplat3d.segment.side_cut import capture_frames
+
+    views = list(uwa640.views)
+    views[0] = views[0].with_(image=cv2.resize(views[0].image, None, fx=1.3, fy=1.3, interpolation=cv2.INTER_CUBIC),
+                              mask=None, camera=None, depth=None)
+    views = [view.with_(mask=finger_mask(view.image) if view.mask is None else view.mask) for view in views]
+    prepared = _prepare(views)
+    charts = [CylinderChart.from_frame(frame) for frame in capture_frames(prepared.masks)]
+    step = max(1.0, prepared.period / 8.0)
+    unwrapped = [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, prepared.textures, prepared.masks)]
+    config = RegistrationConfig(undecided_peaks=0)
+    found = _candidate_shifts(0, 1, prepared, charts, unwrapped, config, voted=True)
+    at_zoom = {zoom: shift for shift, zoom in found}
+    assert 0.8 in at_zoom, found  # the partner's ridges shrunk as the enlarged view's are grown
+    truth = rotation_angle_deg(uwa640.views[1].camera.world_to_cam[:3, :3], uwa640.views[0].camera.world_to_cam[:3, :3])
+    assert abs(abs(np.degrees(at_zoom[0.8].turn)) - truth) < 10.0
+    same_step = _candidate_shifts(0, 1, prepared, charts, unwrapped, RegistrationConfig(undecided_zooms=()), voted=True)
+    assert not any(shift.decisive for shift, _ in same_step)  # the premise: at the same step the vote is undecided
+
+
 @pytest.mark.slow
 def test_a_view_photographed_nearer_is_placed_at_another_zoom(uwa640):
     """One photo enlarged by 1.3 (taken nearer the finger, or zoomed): its ridges are a third larger than the others'
