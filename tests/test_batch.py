@@ -93,8 +93,10 @@ def test_rig_calibrate_command(tmp_path, uwa640, ray_local, capsys):
     assert rig.names == tuple(uwa640.names) and rig.focal > 0 and sorted(rig.info["captures"]) == ["a", "b"]
     assert rig.info["rounds"] == 1
     assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 2  # exists: nothing overwritten
-    assert main(["rig", "calibrate", str(dataset), "-o", str(tmp_path / "one.json"), "--select", "count=1"]) == 3
-    assert "a rig needs at least 2" in capsys.readouterr().err and not (tmp_path / "one.json").exists()
+    # one capture selected: bad input, said before any registration
+    assert main(["rig", "calibrate", str(dataset), "-o", str(tmp_path / "one.json"), "--select", "count=1"]) == 2
+    assert "1 capture in" in (err := capsys.readouterr().err) and "a rig needs at least 2" in err
+    assert not (tmp_path / "one.json").exists()
 
 
 def test_a_dying_worker_is_a_recorded_failure_not_a_crash(ray_local):
