@@ -35,6 +35,14 @@ def test_uwa_jobs_select_and_missing_frames(tmp_path):
         list_jobs([folder], "subject=9")
 
 
+def test_a_folder_without_images_or_captures_is_refused_at_listing(tmp_path):
+    empty = tmp_path / "empty"
+    (empty / "notes").mkdir(parents=True)
+    (empty / "notes" / "readme.txt").write_text("no photos here")
+    with pytest.raises(InputError, match="holds no images and no capture folders"):
+        list_jobs([empty])
+
+
 @pytest.mark.parametrize("text", ["count=0", "colour=red", "subject", "count=x"])
 def test_bad_select_is_one_sentence(text):
     with pytest.raises(InputError, match="--select"):

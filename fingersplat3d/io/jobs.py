@@ -119,6 +119,8 @@ def list_jobs(paths: Sequence[str | Path], select: str | None = None) -> list[Ca
             jobs = [CaptureJob(p.name, (str(p),)) for p in subfolders]
         else:
             files, _ = _image_files(folder, recursive=True)
+            if not files:  # said now, not as the one capture of a run that then fails it
+                raise input_error(folder, "holds no images and no capture folders")
             kind = _kind_of(files)
             if kind == "uwa":
                 jobs = _uwa_jobs(folder)
