@@ -152,7 +152,6 @@ def test_a_partner_unwrapped_at_another_zoom_votes_for_a_view_photographed_neare
     texture unwrapped at 0.8 of the step."""
     import cv2
 
-    from fingersplat3d.align.correspond.chart import CylinderChart
     from fingersplat3d.align.register import _candidate_shifts, _prepare
     from fingersplat3d.segment.side_cut import capture_frames
 
@@ -161,9 +160,7 @@ def test_a_partner_unwrapped_at_another_zoom_votes_for_a_view_photographed_neare
                               mask=None, camera=None, depth=None)
     views = [view.with_(mask=finger_mask(view.image) if view.mask is None else view.mask) for view in views]
     prepared = _prepare(views)
-    charts = [CylinderChart.from_frame(frame) for frame in capture_frames(prepared.masks)]
-    step = max(1.0, prepared.period / 8.0)
-    unwrapped = [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, prepared.textures, prepared.masks)]
+    charts, unwrapped = prepared.charts(capture_frames(prepared.masks))
     config = RegistrationConfig(undecided_peaks=0)
     found = _candidate_shifts(0, 1, prepared, charts, unwrapped, config, voted=True)
     at_zoom = {zoom: shift for shift, zoom in found}

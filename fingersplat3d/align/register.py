@@ -207,6 +207,13 @@ class _Prepared:
         guided round and view pair read them)."""
         return [silhouette_frame(mask, hint=hint) for mask, hint in zip(self.masks, capture_axes(self.masks))]
 
+    def charts(self, frames) -> tuple[list[CylinderChart], list]:
+        """Each view's cylinder chart on its silhouette frame (``frames``, one per view) and its ridge texture unwrapped
+        on it, an eighth of a ridge period a step: what the first guesses' votes compare."""
+        charts = [CylinderChart.from_frame(frame) for frame in frames]
+        step = max(1.0, self.period / 8.0)
+        return charts, [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, self.textures, self.masks)]
+
     @cached_property
     def maps(self) -> list[RidgeMaps]:
         """Each view as guided matching reads it, with its derived maps kept across pairs and rounds."""
@@ -367,9 +374,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]}
             | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {}) for frame in frames]
     if config.matcher == "surface":
-        charts = [CylinderChart.from_frame(frame) for frame in frames]
-        step = max(1.0, prepared.period / 8.0)
-        unwrapped = [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, prepared.textures, prepared.masks)]
+        charts, unwrapped = prepared.charts(frames)
     rng = np.random.default_rng(config.seed)
     registered = []
     for a, b in pairs:
