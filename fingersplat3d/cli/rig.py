@@ -46,9 +46,9 @@ def run(args: argparse.Namespace) -> int:
 
     check_free(args.output, args.overwrite)
     jobs = list_jobs(args.dataset, args.select)
-    if len(jobs) < 2:  # said before any capture is registered: no registration could make up the second
-        raise InputError(f"{len(jobs)} capture{'' if len(jobs) == 1 else 's'} in {', '.join(map(str, args.dataset))}"
-                         f"{' (' + args.select + ')' if args.select else ''}; a rig needs at least 2")
+    if len(jobs) < 2:  # one (list_jobs refuses none), said before it is registered: nothing could make up the second
+        selected = f" ({args.select})" if args.select else ""
+        raise InputError(f"1 capture in {', '.join(map(str, args.dataset))}{selected}; a rig needs at least 2")
     config = fuse_config(args)
     captures, failures = [], {}
 
