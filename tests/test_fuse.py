@@ -80,13 +80,23 @@ def test_reconstruction_folder_contract(reconstruction, tmp_path):
     assert overview.ndim == 3 and overview.shape[0] >= 360 and overview.shape[1] > 3 * 360
 
 
-def test_metric_hints_make_millimetres(uwa):
+def test_metric_hints_make_millimetres(uwa, reconstruction):
+    """Either metric hint scales the fused finger to millimetres: its width comes out a finger's. The scale's own step
+    on the module's reconstruction (two more fuses would redo the same registration); ``--px-per-mm`` end to end, units
+    and all, is in test_cli_fuse_on_the_shipped_sample."""
+    from fingersplat3d.pipeline import _metric_scale
+
     truth_px_per_mm = uwa.views[0].camera.K[0, 0] / np.nanmedian(uwa.views[0].depth)
-    for config in (FuseConfig(px_per_mm=truth_px_per_mm, splat=None), FuseConfig(finger_width_mm=16.0, splat=None)):
-        result = fuse(uwa, config)
-        assert result.units == "mm" and result.scale_mm_per_unit > 0
-        extent = np.ptp(np.asarray(result.cloud.points), axis=0)
-        assert 8 < np.sort(extent)[1] < 30  # the finger's width comes out in millimetres
+    rec = reconstruction
+    assert rec.units == "arbitrary" and rec.scale_mm_per_unit is None
+    points = np.asarray(rec.cloud.points)
+    for config in (FuseConfig(px_per_mm=truth_px_per_mm), FuseConfig(finger_width_mm=16.0)):
+        report = {}
+        mm_per_unit = _metric_scale(config, rec.cameras, rec.depths, rec.cloud, report)
+        assert mm_per_unit > 0
+        assert 8 < np.sort(np.ptp(points * mm_per_unit, axis=0))[1] < 30  # the finger's width in millimetres
+    assert report["measured_width_units"] * mm_per_unit == pytest.approx(16.0)
+    assert _metric_scale(GEOMETRY, rec.cameras, rec.depths, rec.cloud, {}) is None
 
 
 def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
