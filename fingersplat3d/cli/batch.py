@@ -12,11 +12,16 @@ from .types import POSITIVE, number
 
 __all__ = ["add", "run"]
 
+NAME = "batch"
+HELP = "reconstruct every capture of a dataset on Ray, resumable, with a results table and an HTML report"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d batch``: its arguments."""
     batch = commands.add_parser(
-        "batch", help="reconstruct every capture of a dataset on Ray, resumable, with a results table and an HTML report",
+        NAME, help=HELP,
         description="Fuse (and splat and render) every capture of a dataset, each as one Ray task (a local Ray "
                     "instance by default, --address to join a cluster). OUT/<capture>/ is written exactly as "
                     "'fs3d fuse' writes it (+ renders/ and thumbs/) and appears only when complete; a re-run "

@@ -6,20 +6,25 @@ from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
 from ..errors import InputError
-from ..splat.config import PRESETS
 from .common import finished
 from .types import COUNT, size
 
 __all__ = ["add", "run"]
 
+NAME = "bench"
+HELP = "the speed / accuracy trade: presets and knobs swept, time and memory against error"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d bench``: its arguments."""
     from ..experiments.bench import sweep
+    from ..splat.config import PRESETS
 
     knobs = ("preset", "resolution", "iterations", "gaussians", "views")
     bench = commands.add_parser(
-        "bench", help="the speed / accuracy trade: presets and knobs swept, time and memory against error",
+        NAME, help=HELP,
         description="Fuse synthetic captures (ring rig, varied finger shapes by seed) under a baseline preset and "
                     "under a sweep of one knob at a time (presets, working resolution, fit iterations, Gaussian "
                     "budget, number of views), each run in a fresh process: stage times and peak memory against "
@@ -41,6 +46,7 @@ def add(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..experiments.bench import run_bench
+    from ..splat.config import PRESETS
 
     knobs = tuple(k.strip() for k in args.knobs.split(",") if k.strip())
     unknown = [k for k in knobs if k not in args.all_knobs]

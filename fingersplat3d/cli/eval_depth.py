@@ -12,11 +12,16 @@ from .common import finished
 
 __all__ = ["add", "run"]
 
+NAME = "depth"
+HELP = "depth error against PolyU 3D+ height maps or a capture's depth/"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(actions) -> None:
     """``fs3d eval depth``: its arguments."""
     depth = actions.add_parser(
-        "depth", help="depth error against PolyU 3D+ height maps or a capture's depth/",
+        NAME, help=HELP,
         description="Reconstruct each image alone (monocular mode) and compare its depth with the height map of the "
                     "same name in --truth (PolyU 3D+ .mat files: the variable 'fc', flipped upside down), or fuse "
                     "capture folders and compare every view with its depth/. Mean absolute error after a "

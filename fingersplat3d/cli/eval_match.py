@@ -13,12 +13,17 @@ from .types import angle_list
 
 __all__ = ["add", "run"]
 
+NAME = "match"
+HELP = "mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(actions) -> None:
     from ..experiments.match import DEFAULT_ANGLES, GALLERY_NAMING, UWA_NAMING
 
     match = actions.add_parser(
-        "match", help="mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET",
+        NAME, help=HELP,
         description="Make a contact-like print (8-bit gray, ridges dark, ~500 ppi, tip up) of every photo, find its "
                     "minutiae (mindtct) and NFIQ2, and score every two photos of different captures seen by the same "
                     "camera with bozorth3: genuine when the finger is the same (read from the file names), impostor "

@@ -6,15 +6,21 @@ import statistics
 from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
-from ..splat.config import PRESETS, preset
 from .common import finished, named_captures, nbis_needed
 
 __all__ = ["add", "run"]
 
+NAME = "quality"
+HELP = "leave-one-view-out renders against the real views: PSNR, SSIM, NFIQ2"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(actions) -> None:
+    from ..splat.config import PRESETS
+
     quality = actions.add_parser(
-        "quality", help="leave-one-view-out renders against the real views: PSNR, SSIM, NFIQ2",
+        NAME, help=HELP,
         description="Register every view of each capture, then for each view fit Gaussians to the other views only, "
                     "render the left-out view at its camera (placed, and aligned to the photo with the model frozen) "
                     "and score it against the photo inside the finger mask: PSNR, SSIM, and NFIQ2 of the photo and "
@@ -33,6 +39,7 @@ def add(actions) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..experiments.quality import run_quality_evaluation
     from ..pipeline import FuseConfig
+    from ..splat.config import preset
 
     if not args.no_nfiq2:
         nbis_needed("fs3d eval quality (or give --no-nfiq2)")

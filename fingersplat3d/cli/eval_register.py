@@ -12,10 +12,15 @@ from .types import view_pairs
 
 __all__ = ["add", "run"]
 
+NAME = "register"
+HELP = "minutiae carried between views: 3D model vs rigid 2D and TPS baselines"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(actions) -> None:
     register = actions.add_parser(
-        "register", help="minutiae carried between views: 3D model vs rigid 2D and TPS baselines",
+        NAME, help=HELP,
         description="Carry minutiae of view A into view B through each reconstruction (depth + cameras) and with "
                     "the paper's 2D baselines (a RANSAC similarity and a thin-plate spline, fitted to the mates and "
                     "cross-validated), and measure the mean pixel distance to their mates in B. Mates: --mates CSV, "

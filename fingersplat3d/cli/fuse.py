@@ -6,8 +6,6 @@ import sys
 import time
 from pathlib import Path
 
-from ..align.register import RegistrationConfig
-from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
 from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, ridge_px, splat_config
@@ -15,11 +13,18 @@ from .types import COUNT, FINGER_MM, POSITIVE, PX_PER_MM, STEPS
 
 __all__ = ["add", "run"]
 
+NAME = "fuse"
+HELP = "3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaussians, depth maps, mesh"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d fuse``: its arguments."""
+    from ..align.solve.global_opt import GlobalAlignConfig
+
     fuse = commands.add_parser(
-        "fuse", help="3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaussians, depth maps, mesh",
+        NAME, help=HELP,
         description="Recover the cameras and one fused 3D finger surface from photos with no camera "
                     "parameters: per-view pointmaps, pairwise registration on ridge-texture correspondences, "
                     "joint global alignment (poses, focal, depth), optional ICP, then a Gaussian-splat fit to the "
@@ -68,6 +73,8 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..align.register import RegistrationConfig
+    from ..align.solve.global_opt import GlobalAlignConfig
     from ..device import resolve_device
     from ..io.datasets import load_any
     from ..pipeline import FuseConfig, fuse, write_reconstruction

@@ -10,12 +10,17 @@ import numpy as np
 
 __all__ = ["add", "run", "describe", "describe_reconstruction"]
 
+NAME = "info"
+HELP = "describe a capture, dataset or reconstruction folder"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 RECONSTRUCTION_FILES = ("fused.ply", "gaussians.ply", "mesh.ply", "depth", "report.json", "overview.png", "views")
 
 
 def add(commands) -> None:
     """``fs3d info``: its arguments."""
-    info = commands.add_parser("info", help="describe a capture, dataset or reconstruction folder",
+    info = commands.add_parser(NAME, help=HELP,
                                description="Print what a capture folder (or a UWA / CFPose / plain image folder) holds, "
                                            "or what a reconstruction folder from 'fs3d fuse' says of its views: "
                                            "registered or not, focal, the share of each view backed by a second one, "

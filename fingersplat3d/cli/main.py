@@ -29,7 +29,7 @@ from . import (
     synth,
 )
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "command_of"]
 
 COMMANDS = (synth, fuse, info, preview, render, prints, batch, rig)
 EVAL_ACTIONS = (eval_depth, eval_match, eval_register, eval_quality)
@@ -42,7 +42,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+EVAL_HELP = "the paper's experiments: depth error, matching, view registration, image quality"
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``fs3d`` parser. ``command``: the one command whose arguments are built; the others are listed by name and
+    help line only, so that ``fs3d --help`` or ``fs3d info`` does not wait for torch (their arguments' defaults live
+    in modules that load it: 4-5 s on 2 cores). None: every command in full."""
     parser = _Parser(
         prog="fs3d",
         description="fingersplat3d: 3D fingerprints from 2-3 uncalibrated photos of a finger.",
@@ -50,16 +56,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"fingersplat3d {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for command in COMMANDS:
-        command.add(commands)
-    evaluate = commands.add_parser("eval", help="the paper's experiments: depth error, matching, view registration, image quality",
-                                   description="Evaluate reconstructions against ground truth.")
-    actions = evaluate.add_subparsers(dest="action", metavar="ACTION", required=True)
-    for action in EVAL_ACTIONS:
-        action.add(actions)
-    register.add(commands)
-    bench.add(commands)
+
+    def add(module, into) -> None:
+        if command is None or command == module.NAME:
+            module.add(into)
+        else:
+            into.add_parser(module.NAME, help=module.HELP)
+
+    for module in COMMANDS:
+        add(module, commands)
+    if command in (None, "eval"):
+        evaluate = commands.add_parser("eval", help=EVAL_HELP, description="Evaluate reconstructions against ground truth.")
+        actions = evaluate.add_subparsers(dest="action", metavar="ACTION", required=True)
+        for action in EVAL_ACTIONS:
+            action.add(actions)
+    else:
+        commands.add_parser("eval", help=EVAL_HELP)
+    add(register, commands)
+    add(bench, commands)
     return parser
+
+
+def command_of(argv: list[str]) -> str | None:
+    """The command ``argv`` names (its first word not an option), or None."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 def _note_printer(command: str):
@@ -78,7 +98,8 @@ def _note_printer(command: str):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(command_of(argv) or "")
     try:
         args = parser.parse_args(argv)
     except SystemExit as stop:  # --help and --version exit 0 as argparse does; argument errors return 2

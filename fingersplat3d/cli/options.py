@@ -4,16 +4,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..align.register import MATCHERS, RegistrationConfig
-from ..align.solve.photometric import PhotometricConfig
-from ..splat.config import DEFAULT_PRESET, PRESETS, preset
-from ..working_scale import RIDGE_PX
 from .types import COUNT, POSITIVE, SEED, STEPS, number
 
 __all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "ridge_px", "read_rig"]
 
 
 def add_registration_arguments(parser) -> None:
+    from ..align.register import MATCHERS, RegistrationConfig
+    from ..working_scale import RIDGE_PX
+
     parser.add_argument("--matcher", default="surface", choices=MATCHERS,
                         help="first correspondences between views: surface (default: ridge texture unwrapped on cylinder "
                              "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
@@ -30,12 +29,16 @@ def add_registration_arguments(parser) -> None:
                              "put back on the photos' grid; 0 keeps the photos' own resolution")
 
 
-def photometric_config(args: argparse.Namespace) -> PhotometricConfig:
+def photometric_config(args: argparse.Namespace):
     """The dense photometric refinement ``--photometric`` asks for (off: no iterations)."""
+    from ..align.solve.photometric import PhotometricConfig
+
     return PhotometricConfig() if getattr(args, "photometric", False) else PhotometricConfig(iterations=0)
 
 
 def add_splat_arguments(parser) -> None:
+    from ..splat.config import DEFAULT_PRESET, PRESETS
+
     splat = parser.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
     splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
     splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
@@ -67,6 +70,8 @@ def splat_config(args: argparse.Namespace):
     """The splat settings from ``--splat-*`` (None with ``--no-splat``)."""
     if args.no_splat:
         return None
+    from ..splat.config import preset
+
     return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
                   refine_poses=args.pose_refinement,
                   facing_shading=False if getattr(args, "no_shading", False) else None)
@@ -74,6 +79,7 @@ def splat_config(args: argparse.Namespace):
 
 def fuse_config(args: argparse.Namespace):
     """The fuse settings shared by ``fuse``-like commands (``batch``, ``rig calibrate``)."""
+    from ..align.register import RegistrationConfig
     from ..pipeline import FuseConfig
 
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,

@@ -8,10 +8,15 @@ from .types import number
 
 __all__ = ["add", "run"]
 
+NAME = "preview"
+HELP = "save a contact-sheet picture of a capture"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d preview``: its arguments."""
-    preview = commands.add_parser("preview", help="save a contact-sheet picture of a capture",
+    preview = commands.add_parser(NAME, help=HELP,
                                   description="Save a PNG with, for each view, the photo (ground-truth minutiae drawn: "
                                               "endings red, bifurcations blue), the mask and the depth map.")
     preview.add_argument("capture", type=Path, help="capture folder")

@@ -11,11 +11,16 @@ from .types import PX_PER_MM, number
 
 __all__ = ["add", "run"]
 
+NAME = "print"
+HELP = "fingerprints a matcher can use: the rolled-equivalent print of a 3D model, contact-like prints of photos"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d print``: its arguments."""
     prints = commands.add_parser(
-        "print", help="fingerprints a matcher can use: the rolled-equivalent print of a 3D model, contact-like prints of photos",
+        NAME, help=HELP,
         description="For each reconstruction folder (fs3d fuse -o), the rolled-equivalent print of its model: the finger's "
                     "surface unrolled by arc length, textured from the photos that see it most squarely, ridges dark, "
                     "tip up, ~500 ppi; for each image file, a contact-like print of the photo. Writes OUT/<name>.png, "

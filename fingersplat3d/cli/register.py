@@ -9,11 +9,16 @@ from ..errors import InputError
 
 __all__ = ["add", "run"]
 
+NAME = "register"
+HELP = "carry pixel positions (minutiae) and image A into view B through the 3D model"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d register``: its arguments."""
     register = commands.add_parser(
-        "register", help="carry pixel positions (minutiae) and image A into view B through the 3D model",
+        NAME, help=HELP,
         description="Lift pixels of view A onto the reconstructed surface (A's depth and camera) and project them "
                     "into view B; points off the surface, outside B or hidden in B are marked, not dropped. Also "
                     "warps image A into B's frame. Writes points.csv (with --points) and warp.png.")

@@ -11,11 +11,16 @@ from .types import angles, number
 
 __all__ = ["add", "run"]
 
+NAME = "render"
+HELP = "render novel views of a fitted finger (gaussians.ply) at any angle"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d render``: its arguments."""
     render = commands.add_parser(
-        "render", help="render novel views of a fitted finger (gaussians.ply) at any angle",
+        NAME, help=HELP,
         description="Render new views of the Gaussian-splat model of a reconstruction folder written by "
                     "'fs3d fuse': by default COUNT views at equal steps on the arc from the leftmost through "
                     "the front to the rightmost input camera (the paper's 12), or the views at --angles "

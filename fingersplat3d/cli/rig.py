@@ -7,7 +7,6 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from ..align.solve.global_opt import GlobalAlignConfig
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
 from .options import add_dataset_arguments, fuse_config
@@ -15,10 +14,15 @@ from .types import number
 
 __all__ = ["add", "run", "register_job"]
 
+NAME = "rig"
+HELP = "a fixed camera rig: calibrate it from many captures"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d rig calibrate``: its arguments."""
-    rig = commands.add_parser("rig", help="a fixed camera rig: calibrate it from many captures",
+    rig = commands.add_parser(NAME, help=HELP,
                               description="Tools for a fixed multi-camera rig (UWA's three cameras).")
     actions = rig.add_subparsers(dest="action", metavar="ACTION", required=True)
     calibrate = actions.add_parser(
@@ -39,6 +43,7 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..align.solve.global_opt import GlobalAlignConfig
     from ..align.solve.rig import calibrate_rig
     from ..batch.engine import ray_map
     from ..io.jobs import list_jobs

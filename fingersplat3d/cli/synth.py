@@ -7,19 +7,25 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..atomic import check_free
-from ..synth.rigs import CAMERA_DISTANCE_MM
-from ..synth.shape import SHAPES
 from .types import COUNT, POSITIVE, SEED, angles, number, size
 
 DISTANCE = number(float, 30.0, 2000.0)
 
 __all__ = ["add", "run"]
 
+NAME = "synth"
+HELP = "generate synthetic 3D fingers photographed by a rig, with exact ground truth"
+"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
+command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
+
 
 def add(commands) -> None:
     """``fs3d synth``: its arguments."""
+    from ..synth.rigs import CAMERA_DISTANCE_MM
+    from ..synth.shape import SHAPES
+
     synth = commands.add_parser(
-        "synth", help="generate synthetic 3D fingers photographed by a rig, with exact ground truth",
+        NAME, help=HELP,
         description="Generate procedural 3D fingertips with fingerprint ridges and photograph them with a "
                     "capture rig. Writes one capture folder per finger: images/, masks/, depth/ (camera-frame "
                     "z in mm), cameras.json, minutiae.json (3D, per-view pixels and on the rolled print), mesh.ply, "
