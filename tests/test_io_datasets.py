@@ -164,3 +164,27 @@ def test_explicit_files_are_used_as_given(tmp_path):
     with pytest.raises(InputError, match="missing frame 1"):  # a folder is a dataset: its groups must be whole
         (tmp_path / "uwa" / "1_1_3_1.jpg").unlink()
         load_any(uwa)
+
+
+def test_webp_photos_are_read_upright_and_heic_is_named_with_what_to_do(tmp_path):
+    """A phone may save WebP (read, turned as its EXIF says, like a JPEG) or HEIC (not read: the error says so and
+    what to do, not just "not an image")."""
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    stored = (rng.random((40, 64, 3)) * 255).astype(np.uint8)  # stored sideways, the tag turns it upright
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    for name in ("a", "b"):
+        Image.fromarray(stored).save(tmp_path / f"{name}.webp", exif=exif, lossless=True)
+    capture = load_image_folder([tmp_path / "a.webp", tmp_path / "b.webp"])
+    assert capture.names == ["a", "b"] and capture.views[0].image.shape[:2] == (64, 40)
+    (tmp_path / "c.heic").write_bytes(b"\x00\x00\x00\x18ftypheic")
+    with pytest.raises(InputError, match="HEIC photos are not read: save them as JPEG"):
+        load_image_folder([tmp_path / "a.webp", tmp_path / "c.heic"])
+    assert load_image_folder(tmp_path).names == ["a", "b"]  # a folder's HEIC beside them is left out, as any other file
+    only_heic = tmp_path / "iphone"
+    only_heic.mkdir()
+    (only_heic / "IMG_0001.HEIC").write_bytes(b"\x00\x00\x00\x18ftypheic")
+    with pytest.raises(InputError, match="holds no images .*its HEIC photos are not read: save them as JPEG"):
+        load_any(only_heic)

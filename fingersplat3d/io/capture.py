@@ -42,7 +42,7 @@ from ..scene import Capture, View
 from ..synth.rolled import ROLLED_PRINT_FILE
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
-from .images import IMAGE_SUFFIXES, read_image, read_mask, write_image, write_mask
+from .images import IMAGE_SUFFIXES, read_image, read_mask, unread_photos_note, write_image, write_mask
 from .jsonio import read_json
 from .minutiae import write_minutiae
 from .ply import write_mesh_ply
@@ -321,7 +321,7 @@ def capture_files(folder: str | Path) -> CaptureFiles:
                     raise input_error(path, f"two images for view {path.stem!r} ({stems[path.stem].name} and {path.name})")
                 stems[path.stem] = path
         if not stems:
-            raise input_error(images_dir, "holds no images (.png, .jpg, .tif or .bmp)")
+            raise input_error(images_dir, f"holds no images ({', '.join(IMAGE_SUFFIXES)})" + unread_photos_note(images_dir))
         views = sorted(stems, key=_natural_key)
         listed.update(cameras=None, minutiae=None, mesh=None)
     images, masks, depth = {}, {}, {}

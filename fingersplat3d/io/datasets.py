@@ -31,7 +31,7 @@ from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
 from .exif import exif_focal
-from .images import IMAGE_SUFFIXES, read_image, read_mask
+from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_image, read_mask, unread_photos_note
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
            "load_cfpose", "load_image_folder", "load_any", "natural_key"]
@@ -244,6 +244,9 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
     files, where = _image_files(folder_or_files, recursive=False)
     if explicit:
         for path in files:
+            if path.suffix.lower() in UNREAD_SUFFIXES:
+                raise input_error(path, f"{UNREAD_SUFFIXES[path.suffix.lower()]} photos are not read: save them as JPEG "
+                                        f"or PNG first (most phones can shoot JPEG), keeping their EXIF for the focal")
             if path.suffix.lower() not in IMAGE_SUFFIXES:
                 raise input_error(path, f"not an image file (expected one of {', '.join(IMAGE_SUFFIXES)})")
     else:
@@ -332,7 +335,7 @@ def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = No
             files, _ = _image_files(path, recursive=False)
             files = [file for file in files if not file.stem.endswith(_MASK_SUFFIX)]
             if not files:
-                raise input_error(path, "holds no images and is not a capture folder")
+                raise input_error(path, "holds no images and is not a capture folder" + unread_photos_note(path))
         else:
             files = [path]
     else:

@@ -13,9 +13,20 @@ import numpy as np
 from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
+__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos_note", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
+UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
+                   ".arw": "raw"}
+"""Photo formats a phone or camera may write that OpenCV does not read here: named in the error, with what to do."""
+
+
+def unread_photos_note(folder: Path) -> str:
+    """``"; it holds N HEIC photos ..."`` when ``folder`` holds photos of a format in :data:`UNREAD_SUFFIXES` (what
+    to do about them), else ``""``: the end of a "holds no images" sentence."""
+    kinds = sorted({UNREAD_SUFFIXES[p.suffix.lower()] for p in Path(folder).iterdir()
+                    if p.is_file() and p.suffix.lower() in UNREAD_SUFFIXES}) if Path(folder).is_dir() else []
+    return f"; its {' and '.join(kinds)} photos are not read: save them as JPEG or PNG first" if kinds else ""
 
 
 def find_files(paths: list[Path], suffixes: tuple[str, ...] = IMAGE_SUFFIXES) -> list[Path]:

@@ -26,6 +26,7 @@ from ..errors import InputError, input_error
 from ..scene import Capture
 from .capture import is_capture_folder
 from .datasets import UWA_VIEW_FRAMES, _cfpose_fingers, _image_files, _kind_of, find_uwa_groups, load_any, natural_key
+from .images import unread_photos_note
 
 __all__ = ["CaptureJob", "list_jobs", "load_job", "parse_select"]
 
@@ -120,7 +121,7 @@ def list_jobs(paths: Sequence[str | Path], select: str | None = None) -> list[Ca
         else:
             files, _ = _image_files(folder, recursive=True)
             if not files:  # said now, not as the one capture of a run that then fails it
-                raise input_error(folder, "holds no images and no capture folders")
+                raise input_error(folder, "holds no images and no capture folders" + unread_photos_note(folder))
             kind = _kind_of(files)
             if kind == "uwa":
                 jobs = _uwa_jobs(folder)
