@@ -412,7 +412,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             and not all(alignment.aligned)):
         say("undecided votes: their peaks and other zooms through the model")
         alignment = _placed_by_agreement(alignment, registered, pairs, records, prepared, charts, unwrapped, pointmaps,
-                                         align, config, rng)
+                                         align, config, rng, say)
     solved_with = (registered, None)  # what the alignment in hand was fitted to (its matches, its least turns)
     contours: list[PairCorrespondences] = []
     # Each pair's least turn from the silhouettes: held by hinge rows only where GlobalAlignConfig.turn_bound_weight > 0.
@@ -483,9 +483,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
-                         rng) -> GlobalAlignment:
+                         rng, say=lambda text: None) -> GlobalAlignment:
     """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
-    (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``); ``registered`` grows by the pairs that place them."""
+    (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``); ``registered`` grows by the pairs that place them.
+    ``say``: told each pair and turn tried (a capture that will not register spends 20-40 s here at 1280x1024)."""
     import torch
 
     from ..rotations import rotation_angle
@@ -509,6 +510,7 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                 if other is None or not alignment.aligned[other] or record["ok"] or pair in done:
                     continue
                 done.add(pair)
+                say(f"undecided votes: {record['a']}-{record['b']}, their peaks and other zooms")
                 for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, "turn_ratio" in record):
                     entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
                     if zoom != 1.0:
@@ -516,6 +518,8 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     record.setdefault("undecided_peaks", []).append(entry)
                     if shift.support < config.undecided_min_votes:
                         continue
+                    say(f"undecided votes: {record['a']}-{record['b']} tried at {entry['turn_deg']:g}°"
+                        + (f", zoom {zoom:.2f}" if zoom != 1.0 else ""))
                     verified = _verified(_chart_guess(prepared, a, b, charts, shift, trying, zoom), period, trying)
                     entry["matches"] = len(verified)
                     if len(verified) < trying.min_matches:
