@@ -47,8 +47,8 @@ EVAL_HELP = "the paper's experiments: depth error, matching, view registration, 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``fs3d`` parser. ``command``: the one command whose arguments are built; the others are listed by name and
-    help line only, so that ``fs3d --help`` or ``fs3d info`` does not wait for torch (their arguments' defaults live
-    in modules that load it: 4-5 s on 2 cores). None: every command in full."""
+    help line only, so that ``fs3d --help`` does not wait for torch (the commands' defaults live in modules that load
+    it: 5 s on 2 cores) and a command does not load the others' libraries. None: every command in full."""
     parser = _Parser(
         prog="fs3d",
         description="fingersplat3d: 3D fingerprints from 2-3 uncalibrated photos of a finger.",

@@ -22,8 +22,8 @@ UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "r
 
 
 def unread_photos_note(folder: Path) -> str:
-    """``"; it holds N HEIC photos ..."`` when ``folder`` holds photos of a format in :data:`UNREAD_SUFFIXES` (what
-    to do about them), else ``""``: the end of a "holds no images" sentence."""
+    """``"; its HEIC photos are not read: ..."`` (what to do) when ``folder`` holds photos of a format in
+    :data:`UNREAD_SUFFIXES`, else ``""``: the end of a "holds no images" sentence."""
     kinds = sorted({UNREAD_SUFFIXES[p.suffix.lower()] for p in Path(folder).iterdir()
                     if p.is_file() and p.suffix.lower() in UNREAD_SUFFIXES}) if Path(folder).is_dir() else []
     return f"; its {' and '.join(kinds)} photos are not read: save them as JPEG or PNG first" if kinds else ""
