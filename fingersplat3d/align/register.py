@@ -483,7 +483,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
-                         rng, say=lambda text: None) -> GlobalAlignment:
+                         rng, say) -> GlobalAlignment:
     """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
     (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``); ``registered`` grows by the pairs that place them.
     ``say``: told each pair and turn tried (a capture that will not register spends 20-40 s here at 1280x1024)."""

@@ -14,8 +14,6 @@ __all__ = ["add", "run"]
 
 NAME = "batch"
 HELP = "reconstruct every capture of a dataset on Ray, resumable, with a results table and an HTML report"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

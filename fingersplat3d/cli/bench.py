@@ -13,8 +13,6 @@ __all__ = ["add", "run"]
 
 NAME = "bench"
 HELP = "the speed / accuracy trade: presets and knobs swept, time and memory against error"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -14,8 +14,6 @@ __all__ = ["add", "run"]
 
 NAME = "depth"
 HELP = "depth error against PolyU 3D+ height maps or a capture's depth/"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(actions) -> None:

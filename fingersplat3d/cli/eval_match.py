@@ -15,8 +15,6 @@ __all__ = ["add", "run"]
 
 NAME = "match"
 HELP = "mindtct + bozorth3 matching of photos and synthesized views: EER, FMR, DET"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(actions) -> None:

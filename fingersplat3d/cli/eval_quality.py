@@ -12,8 +12,6 @@ __all__ = ["add", "run"]
 
 NAME = "quality"
 HELP = "leave-one-view-out renders against the real views: PSNR, SSIM, NFIQ2"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(actions) -> None:

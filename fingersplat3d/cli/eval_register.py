@@ -14,8 +14,6 @@ __all__ = ["add", "run"]
 
 NAME = "register"
 HELP = "minutiae carried between views: 3D model vs rigid 2D and TPS baselines"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(actions) -> None:

@@ -15,8 +15,6 @@ __all__ = ["add", "run"]
 
 NAME = "fuse"
 HELP = "3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaussians, depth maps, mesh"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

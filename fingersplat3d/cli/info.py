@@ -12,8 +12,6 @@ __all__ = ["add", "run", "describe", "describe_reconstruction"]
 
 NAME = "info"
 HELP = "describe a capture, dataset or reconstruction folder"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 RECONSTRUCTION_FILES = ("fused.ply", "gaussians.ply", "mesh.ply", "depth", "report.json", "overview.png", "views")
 

@@ -1,7 +1,9 @@
 """``fs3d``: the command line. Thin: parses arguments, calls the library, reports errors in one line.
 
 Each command's arguments and runner live in a module of their own (``add(commands)`` registers the
-arguments and sets ``run``); this one only assembles them and turns errors into exit statuses.
+arguments and sets ``run``; ``NAME`` and ``HELP`` are its name and its line in ``fs3d --help``, and its module
+imports nothing heavy at the top, so that listing it costs nothing); this one only assembles them (the arguments of
+the command run only, :func:`build_parser`) and turns errors into exit statuses.
 """
 from __future__ import annotations
 

@@ -10,8 +10,6 @@ __all__ = ["add", "run"]
 
 NAME = "preview"
 HELP = "save a contact-sheet picture of a capture"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -13,8 +13,6 @@ __all__ = ["add", "run"]
 
 NAME = "print"
 HELP = "fingerprints a matcher can use: the rolled-equivalent print of a 3D model, contact-like prints of photos"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -11,8 +11,6 @@ __all__ = ["add", "run"]
 
 NAME = "register"
 HELP = "carry pixel positions (minutiae) and image A into view B through the 3D model"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -13,8 +13,6 @@ __all__ = ["add", "run"]
 
 NAME = "render"
 HELP = "render novel views of a fitted finger (gaussians.ply) at any angle"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -16,8 +16,6 @@ __all__ = ["add", "run", "register_job"]
 
 NAME = "rig"
 HELP = "a fixed camera rig: calibrate it from many captures"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -15,8 +15,6 @@ __all__ = ["add", "run"]
 
 NAME = "synth"
 HELP = "generate synthetic 3D fingers photographed by a rig, with exact ground truth"
-"""The name and the line ``fs3d --help`` gives it; its arguments, and the libraries they need, load only when it is the
-command run (:func:`~fingersplat3d.cli.main.build_parser`)."""
 
 
 def add(commands) -> None:

@@ -31,7 +31,7 @@ from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
 from .exif import exif_focal
-from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_image, read_mask, unread_photos_note
+from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_image, read_mask, unread_photos, unread_photos_note
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
            "load_cfpose", "load_image_folder", "load_any", "natural_key"]
@@ -245,8 +245,7 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
     if explicit:
         for path in files:
             if path.suffix.lower() in UNREAD_SUFFIXES:
-                raise input_error(path, f"{UNREAD_SUFFIXES[path.suffix.lower()]} photos are not read: save them as JPEG "
-                                        f"or PNG first (most phones can shoot JPEG), keeping their EXIF for the focal")
+                raise input_error(path, unread_photos([UNREAD_SUFFIXES[path.suffix.lower()]]))
             if path.suffix.lower() not in IMAGE_SUFFIXES:
                 raise input_error(path, f"not an image file (expected one of {', '.join(IMAGE_SUFFIXES)})")
     else:

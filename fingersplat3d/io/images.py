@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos_note", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
+__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
@@ -21,12 +21,18 @@ UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "r
 """Photo formats a phone or camera may write that OpenCV does not read here: named in the error, with what to do."""
 
 
+def unread_photos(kinds) -> str:
+    """``"HEIC photos are not read: ..."``: what to do with photos of the formats ``kinds`` (names from
+    :data:`UNREAD_SUFFIXES`)."""
+    return f"{' and '.join(sorted(set(kinds)))} photos are not read: save them as JPEG or PNG first (keeping their EXIF)"
+
+
 def unread_photos_note(folder: Path) -> str:
-    """``"; its HEIC photos are not read: ..."`` (what to do) when ``folder`` holds photos of a format in
-    :data:`UNREAD_SUFFIXES`, else ``""``: the end of a "holds no images" sentence."""
-    kinds = sorted({UNREAD_SUFFIXES[p.suffix.lower()] for p in Path(folder).iterdir()
-                    if p.is_file() and p.suffix.lower() in UNREAD_SUFFIXES}) if Path(folder).is_dir() else []
-    return f"; its {' and '.join(kinds)} photos are not read: save them as JPEG or PNG first" if kinds else ""
+    """``"; its HEIC photos are not read: ..."`` when ``folder`` holds photos of a format in :data:`UNREAD_SUFFIXES`,
+    else ``""``: the end of a "holds no images" sentence."""
+    kinds = [UNREAD_SUFFIXES[p.suffix.lower()] for p in Path(folder).iterdir()
+             if p.is_file() and p.suffix.lower() in UNREAD_SUFFIXES] if Path(folder).is_dir() else []
+    return f"; its {unread_photos(kinds)}" if kinds else ""
 
 
 def find_files(paths: list[Path], suffixes: tuple[str, ...] = IMAGE_SUFFIXES) -> list[Path]:
