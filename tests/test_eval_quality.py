@@ -17,7 +17,8 @@ def small_capture(tmp_path_factory):
 def test_every_view_is_left_out_and_scored(small_capture, tmp_path, capsys):
     pytest.importorskip("nbis")
     out = tmp_path / "q"
-    assert main(["eval", "quality", str(small_capture), "--splat-preset", "fast", "-o", str(out)]) == 0
+    assert main(["eval", "quality", str(small_capture), "--splat-preset", "fast", "--splat-iterations", "100", "-o",
+                 str(out)]) == 0
     rows = list(csv.DictReader(open(out / "quality.csv")))
     assert [r["view"] for r in rows] == ["left", "center", "right"]
     for row in rows:

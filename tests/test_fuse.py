@@ -128,16 +128,15 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     assert renders == ["arc_00.png", "arc_00_alpha.png", "arc_01.png", "arc_01_alpha.png", "arc_02.png", "arc_02_alpha.png"]
     assert (out / "renders" / "contact_sheet.png").is_file() and (out / "renders" / "depth" / "arc_01.npy").is_file()
     assert main(["render", str(out)]) == 2  # renders/ exists: refuses without --overwrite
-    # --no-shading: the plain SH degree 0 model, said so in report.json and gaussians.ply
-    plain = tmp_path / "plain"
-    assert main(["fuse", str(ROOT / "data_samples" / "uwa_seed0"), "-o", str(plain), "--splat-preset", "fast",
+    # The same images given as a list of files, with --no-shading: the plain SH degree 0 model, said so in
+    # report.json and gaussians.ply.
+    files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
+    plain = tmp_path / "from_files"
+    assert main(["fuse", *files, "-o", str(plain), "--icp", "--px-per-mm", "17.8", "--splat-preset", "fast",
                  "--splat-iterations", "2", "--no-shading"]) == 0
     plain_report = json.loads((plain / "report.json").read_text())["splat"]
     assert plain_report["differs_from_preset"] == {"iterations": 2, "facing_shading": False}
     assert plain_report["shading"]["facing_exponent"] == 0.0 and read_gaussians_ply(plain / "gaussians.ply").facing_exponent == 0.0
-    # The same images given as a list of files.
-    files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
-    assert main(["fuse", *files, "-o", str(tmp_path / "from_files"), "--icp", "--no-splat", "--px-per-mm", "17.8"]) == 0
     # A metric reconstruction says mm in cameras.json (the factor that made it so is in report.json).
     cameras = json.loads((tmp_path / "from_files" / "cameras.json").read_text())
     assert cameras["units"] == "mm" and cameras["scale_mm_per_unit"] is None
@@ -270,6 +269,7 @@ def test_real_views_that_do_not_belong_are_not_registered(odd_one, tmp_path):
     assert code == 3 and report["alignment"]["not_registered"] == ["odd"]
 
 
+@pytest.mark.slow  # 50 s; the default suite refuses another finger on synthetic views
 def test_a_front_view_of_another_finger_is_refused_where_its_chart_vote_passed(tmp_path):
     """The front view of finger 1 beside the side views of finger 2: the chart vote takes the front-side pair (32
     patches at a 45-degree turn, 2.3 times the runner-up) and its first guess finds 64 matches on one epipolar

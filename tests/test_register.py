@@ -50,6 +50,7 @@ def test_a_real_capture_registers_all_three_views_at_rig_angles(real_dev, captur
     assert result.alignment.focal_probe["held"] and "shorter_share" not in result.alignment.focal_probe
 
 
+@pytest.mark.slow  # 35 s; the default suite sees the redraw in test_fuse.py and its refusals below
 def test_pointmaps_are_redrawn_through_a_fitted_focal_far_from_the_guess():
     """A close-up (focal 1.4x the long side, the prior guesses 3x): the relief is drawn again through the fitted focal
     and the last round solved on it; the result stands on those pointmaps and keeps the cameras right."""

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
 from .common import finished, named_captures, nbis_needed
+from .types import STEPS
 
 __all__ = ["add", "run"]
 
@@ -27,6 +28,7 @@ def add(actions) -> None:
                          help="capture folders, folders of UWA / CFPose images, or image files of one capture")
     quality.add_argument("--splat-preset", choices=sorted(PRESETS), default="fast",
                          help="Gaussian fit preset for the left-out fits (default fast)")
+    quality.add_argument("--splat-iterations", type=STEPS, help="override the preset's optimisation steps")
     quality.add_argument("--no-nfiq2", action="store_true", help="PSNR and SSIM only")
     quality.add_argument("--device", default="auto", help="where the fits run: auto (CUDA when available), cpu, cuda")
     quality.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
@@ -43,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         nbis_needed("fs3d eval quality (or give --no-nfiq2)")
     check_free(args.output, args.overwrite)
     captures = named_captures(args.inputs)
-    config = FuseConfig(splat=preset(args.splat_preset), device=args.device)
+    config = FuseConfig(splat=preset(args.splat_preset, iterations=args.splat_iterations), device=args.device)
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         rows = run_quality_evaluation(captures, folder, config, nfiq2=not args.no_nfiq2)
     done = [r for r in rows if r["status"] == "done"]
