@@ -286,3 +286,4 @@ def test_light_spilt_on_the_background_in_stripes_is_not_taken(real_dev):
 
     image = (cv2.imread(str(real_dev / "2_2_10_1_3.jpg"), cv2.IMREAD_GRAYSCALE) / 255.0).astype(np.float32)
     assert _solidity(finger_mask(image).astype(np.uint8)) > 0.97
+

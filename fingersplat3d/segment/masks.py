@@ -10,7 +10,9 @@ any exposure: 16-bit data that only uses the bottom of the range works too):
 1. brightness = the brightest channel (skin is bright in at least one channel on a dark
    background), smoothed by a small Gaussian so ridge texture and sensor noise average out;
 2. a rough two-class split by Otsu's threshold on a subsample of the pixels (a few hot pixels
-   cannot move a histogram split) gives the background level and noise and the skin level;
+   cannot move a histogram split) gives the background level and noise and the skin level; where the skin does not
+   stand out from the dark class so found (a finger's shaded flank as dim as a neighbour beside it is bright, three
+   levels), that class is split again, as long as its darker part is a level of its own, not a noise tail;
 3. the threshold is the midpoint between the background and the skin *at the silhouette*, read
    in a thin band inside a first, low-threshold mask and averaged locally, since the lit side's
    rim is brighter than the shaded side's. The midpoint of a blurred step is where the edge is,
@@ -28,7 +30,8 @@ any exposure: 16-bit data that only uses the bottom of the range works too):
    but only where a closing of the skin mask encloses them: a dim glow or support under the
    finger (seen on real UWA side views) clears the noise floor as well and is not skin;
 5. morphological close then open (kernel ~0.5 % of the image size), the outline smoothed by a
-   sub-pixel blur of the mask, the largest connected component, holes filled.
+   sub-pixel blur of the mask, the largest connected component, holes filled;
+6. a neighbouring finger joined to it is cut away (:mod:`~fingersplat3d.segment.neighbours`; both backgrounds).
 
 Measured on ``fs3d synth`` uwa views at 640x512 (docs/measurements.md, the phone close-up's section): IoU >= 0.9966
 (median 0.999) against the ground-truth mask sharp, >= 0.976 with the rims blurred by sigma 8 px; ~45 ms at 640x512 and
@@ -45,13 +48,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..robust import robust_sigma
-from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
+from .neighbours import one_finger
+from .regions import crest_level, fill_holes, gradient_magnitude, largest_component, local_sums
 
 __all__ = ["finger_mask", "mask_iou", "outward_px", "outline_offset_px"]
 
 SMOOTH_SIGMA_PX = 1.0  # Gaussian pre-smoothing (pixels): averages noise, keeps the edge in place
 MIN_CONTRAST_SIGMAS = 6.0  # skin must stand this many background-noise sigmas above the background
 MAX_COVERAGE = 0.95  # a "finger" covering more of the frame than this means there is no background
+BACKGROUND_SPLITS = 2  # at most this many further splits of the dark class where it holds skin (_thresholds)
 MIN_AREA_PX = 4  # fewer finger pixels than this is no finger
 LOW_MASK_EROSION_PX = 2  # more than the outward bias of the noise-floor edge (~1 px after blurs)
 ROUGH_LEVEL = 0.25  # share of the skin contrast above which the first, rough mask lies (above dim glows)
@@ -75,7 +80,7 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     if not _dark_border(brightness):
         from .any_background import finger_mask_any_background
 
-        return finger_mask_any_background(np.asarray(image, np.float32), name=name)
+        return one_finger(finger_mask_any_background(np.asarray(image, np.float32), name=name))
     height, width = brightness.shape
     smooth = cv2.GaussianBlur(brightness, (0, 0), SMOOTH_SIGMA_PX, borderType=cv2.BORDER_REPLICATE)
     floor, threshold = _thresholds(smooth, name)
@@ -94,10 +99,10 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     # Close then open; the border is replicated so a finger cut by the frame stays cut straight.
     mask8 = cv2.morphologyEx(mask8, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE)
     mask8 = cv2.morphologyEx(mask8, cv2.MORPH_OPEN, kernel, borderType=cv2.BORDER_REPLICATE)
-    mask = _largest_component(_smooth_outline(mask8.view(bool), radius).view(np.uint8))
+    mask = largest_component(_smooth_outline(mask8.view(bool), radius).view(np.uint8))
     if mask is None or mask.sum() < min(MIN_AREA_PX, height * width):
         raise InputError(f"{name}: no finger found (nothing stands out from the dark background)")
-    mask = fill_holes(mask)
+    mask = one_finger(fill_holes(mask))
     if mask.mean() > MAX_COVERAGE:
         raise InputError(f"{name}: the finger covers {100 * mask.mean():.0f}% of the image, "
                          "so there is no background to separate it from")
@@ -188,10 +193,23 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
     if background.size < (1.0 - MAX_COVERAGE) * sample.size:
         raise InputError(f"{name}: the image is bright almost everywhere, so there is no background "
                          "to separate a finger from")
-    bg_level = float(np.median(background))
-    bg_noise = robust_sigma(background, bg_level)
-    skin_level = float(np.median(skin))
-    contrast = skin_level - bg_level
+    bg_level, bg_noise, contrast = _levels(background, skin)
+    for _ in range(BACKGROUND_SPLITS):
+        # Three levels, not two (skin in shade beside lit skin, a dim finger beside a brighter one): the split fell
+        # between the skins and the dark class holds skin too. Only where the skin does not stand out from that class
+        # (an image that would otherwise be refused): it is split again while the background it leaves is large
+        # enough to be the frame's and stands apart from the rest of it.
+        if contrast > MIN_CONTRAST_SIGMAS * bg_noise:
+            break
+        lower = _otsu(background, float(background.min()), float(background.max()))
+        darker = background[background <= lower]
+        if darker.size < (1.0 - MAX_COVERAGE) * sample.size or not lower < split:
+            break
+        level, noise, apart = _levels(darker, background[background > lower])
+        if apart <= MIN_CONTRAST_SIGMAS * noise:  # one level with a tail (noise): no skin in it to split off
+            break
+        split, background, skin = lower, darker, sample[sample > lower]
+        bg_level, bg_noise, contrast = _levels(background, skin)
     if contrast <= MIN_CONTRAST_SIGMAS * bg_noise or contrast < 1e-3 * max(high, 1e-12):
         raise InputError(f"{name}: no finger found (nothing stands out from the background noise)")
     floor = bg_level + max(MIN_CONTRAST_SIGMAS * bg_noise, 0.05 * contrast)
@@ -220,6 +238,12 @@ def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:
             break
         midpoint, region, area, solid = again, grown, grown_area, grown_solid
     return floor, midpoint
+
+
+def _levels(background: np.ndarray, skin: np.ndarray) -> tuple[float, float, float]:
+    """The background's level and noise (robust sigma) and the skin's contrast above it."""
+    level = float(np.median(background))
+    return level, robust_sigma(background, level), float(np.median(skin)) - level
 
 
 def _crest_level(smooth: np.ndarray, threshold: np.ndarray, floor: float) -> np.ndarray:
@@ -286,14 +310,6 @@ def _otsu(values: np.ndarray, low: float, high: float, bins: int = 256) -> float
         between = (mu[-1] * omega - mu) ** 2 / (omega * (1.0 - omega))
     between[~np.isfinite(between)] = -1.0
     return float(edges[int(np.argmax(between)) + 1])
-
-
-def _largest_component(mask8: np.ndarray) -> np.ndarray | None:
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask8, connectivity=8)
-    if count < 2:
-        return None
-    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    return labels == largest
 
 
 def _smooth_outline(mask: np.ndarray, radius: int) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["fill_holes", "local_sums", "gradient_magnitude", "crest_level", "CREST_POWER"]
+__all__ = ["fill_holes", "largest_component", "local_sums", "gradient_magnitude", "crest_level", "CREST_POWER"]
 
 CREST_POWER = 4
 """A crest level's pixels weigh by gradient magnitude to this power: the crest dominates, a ramp or ridge does not."""
@@ -18,6 +18,14 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
     outside = np.isin(labels, border[border > 0])
     return ~outside
+
+
+def largest_component(mask8: np.ndarray) -> np.ndarray | None:
+    """The largest 8-connected piece of ``mask8`` (uint8) as a bool mask; None when it has none."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask8, connectivity=8)
+    if count < 2:
+        return None
+    return labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
 
 
 def local_sums(weight: np.ndarray, weighted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
