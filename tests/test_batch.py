@@ -32,11 +32,19 @@ class _Images(HTMLParser):
             self.rows += 1
 
 
-def test_batch_runs_records_failures_and_resumes(tmp_path, uwa640, ray_local, capsys):
+@pytest.fixture(scope="module")
+def small_capture():
+    """A three-view capture at 320x256: the batch's bookkeeping needs a capture that registers, not a large one."""
+    from fingersplat3d.synth import SynthConfig, synthesize
+
+    return synthesize(1, SynthConfig(size=(320, 256))).capture
+
+
+def test_batch_runs_records_failures_and_resumes(tmp_path, small_capture, ray_local, capsys):
     dataset = tmp_path / "dataset"
-    write_capture(uwa640, dataset / "good")
+    write_capture(small_capture, dataset / "good")
     broken = dataset / "broken"
-    write_capture(uwa640, broken)
+    write_capture(small_capture, broken)
     (broken / "images" / "left.png").write_bytes(b"not a png")
     out = tmp_path / "out"
     stale = out / ".good.tmp-killed"  # what a run killed mid-write leaves
@@ -72,25 +80,25 @@ def test_batch_runs_records_failures_and_resumes(tmp_path, uwa640, ray_local, ca
     assert "0 run now, 1 complete before, 1 failed before" in capsys.readouterr().out
     assert (good / "batch.json").stat().st_mtime_ns == before
     # fixed, and retried on request
-    write_capture(uwa640, broken, overwrite=True)
+    write_capture(small_capture, broken, overwrite=True)
     assert main(["batch", str(dataset), "-o", str(out), "--no-splat", "--retry-failed", "--select", "name=broken"]) == 0
     assert (out / "broken" / "batch.json").is_file() and not (out / ".failed" / "broken.json").exists()
     rows = {row["capture"]: row["status"] for row in csv.DictReader(open(out / "results.csv"))}
     assert rows == {"good": "done", "broken": "done"}  # the table covers every capture on disk, not just this run's
 
 
-def test_rig_calibrate_command(tmp_path, uwa640, ray_local, capsys):
+def test_rig_calibrate_command(tmp_path, small_capture, ray_local, capsys):
     from fingersplat3d.io.rig import read_rig
     from fingersplat3d.synth import SynthConfig, synthesize
 
     dataset = tmp_path / "dataset"
-    write_capture(uwa640, dataset / "a")
-    write_capture(synthesize(3, SynthConfig(size=(640, 512))).capture, dataset / "b")
+    write_capture(small_capture, dataset / "a")
+    write_capture(synthesize(3, SynthConfig(size=(320, 256))).capture, dataset / "b")
     rig_path = tmp_path / "rig.json"
     assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path), "--rounds", "1"]) == 0
     assert "2 captures used" in capsys.readouterr().out
     rig = read_rig(rig_path)
-    assert rig.names == tuple(uwa640.names) and rig.focal > 0 and sorted(rig.info["captures"]) == ["a", "b"]
+    assert rig.names == tuple(small_capture.names) and rig.focal > 0 and sorted(rig.info["captures"]) == ["a", "b"]
     assert rig.info["rounds"] == 1
     assert main(["rig", "calibrate", str(dataset), "-o", str(rig_path)]) == 2  # exists: nothing overwritten
     # one capture selected: bad input, said before any registration
