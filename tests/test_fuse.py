@@ -131,16 +131,18 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     # The same images given as a list of files, with --no-shading: the plain SH degree 0 model, said so in
     # report.json and gaussians.ply.
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
-    plain = tmp_path / "from_files"
-    assert main(["fuse", *files, "-o", str(plain), "--icp", "--px-per-mm", "17.8", "--splat-preset", "fast",
+    from_files = tmp_path / "from_files"
+    assert main(["fuse", *files, "-o", str(from_files), "--icp", "--px-per-mm", "17.8", "--splat-preset", "fast",
                  "--splat-iterations", "2", "--no-shading"]) == 0
-    plain_report = json.loads((plain / "report.json").read_text())["splat"]
+    files_report = json.loads((from_files / "report.json").read_text())
+    plain_report = files_report["splat"]
     assert plain_report["differs_from_preset"] == {"iterations": 2, "facing_shading": False}
-    assert plain_report["shading"]["facing_exponent"] == 0.0 and read_gaussians_ply(plain / "gaussians.ply").facing_exponent == 0.0
+    assert (plain_report["shading"]["facing_exponent"] == 0.0
+            and read_gaussians_ply(from_files / "gaussians.ply").facing_exponent == 0.0)
     # A metric reconstruction says mm in cameras.json (the factor that made it so is in report.json).
-    cameras = json.loads((tmp_path / "from_files" / "cameras.json").read_text())
+    cameras = json.loads((from_files / "cameras.json").read_text())
     assert cameras["units"] == "mm" and cameras["scale_mm_per_unit"] is None
-    assert json.loads((tmp_path / "from_files" / "report.json").read_text())["scale_mm_per_unit"] > 0
+    assert files_report["scale_mm_per_unit"] > 0
 
 
 def test_cli_fuse_refuses_bad_input(tmp_path, capsys):

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from fingersplat3d.segment.masks import mask_iou
+from fingersplat3d.segment.masks import finger_mask, mask_iou
 from fingersplat3d.segment.neighbours import one_finger
 
 HEIGHT, WIDTH = 256, 320
@@ -72,26 +72,31 @@ def rendered_pair():
     return tuple(synthesize(seed, SynthConfig(size=(320, 256))).capture for seed in (1, 4))
 
 
+def with_neighbour_below(view, other, hidden_px: int, scene: np.ndarray | None = None) -> np.ndarray:
+    """``view``'s photo with ``other``'s finger drawn below its finger, its top ``hidden_px`` hidden behind the
+    finger's rim; elsewhere ``scene`` (None: ``other``'s own photo, its dark background)."""
+    size = view.mask.shape[::-1]
+    rows, other_rows = np.nonzero(view.mask)[0], np.nonzero(other.mask)[0]
+    below = np.float32([[1, 0, 0], [0, 1, int(rows.max() - other_rows.min() - hidden_px)]])
+    shifted = cv2.warpAffine(other.image, below, size)
+    if scene is not None:
+        shifted = np.where(cv2.warpAffine(other.mask.view(np.uint8), below, size).view(bool), shifted, scene)
+    return np.where(view.mask, view.image, shifted).astype(np.float32)
+
+
 @pytest.mark.parametrize("background", ["dark", "desk"])
 def test_a_rendered_neighbour_behind_the_finger_is_left_out_of_its_mask(rendered_pair, background):
     """``fs3d synth`` fingers: another finger below, its top 5 px hidden behind the finger's rim. The mask held both
     (IoU with the finger 0.80-0.84); measured now 0.987-0.998 where their outlines part over a quarter of the finger,
     as in the centre view (docs/measurements.md, "A neighbouring finger in the frame")."""
     from fingersplat3d.experiments.backgrounds import bright_desk
-    from fingersplat3d.segment.masks import finger_mask
 
-    size = (320, 256)
     finger_view, other = (capture["center"] for capture in rendered_pair)
-    rows, other_rows = np.nonzero(finger_view.mask)[0], np.nonzero(other.mask)[0]
-    below = np.float32([[1, 0, 0], [0, 1, int(rows.max() - other_rows.min() - 5)]])
-    shifted = cv2.warpAffine(other.image, below, size)
-    shifted_mask = cv2.warpAffine(other.mask.view(np.uint8), below, size)
     if background == "dark":
         scene = np.full(finger_view.image.shape, 0.02, np.float32)
     else:
         scene = bright_desk(finger_view.image.shape + (3,), np.random.default_rng(1)).mean(axis=2).astype(np.float32)
-    image = np.where(finger_view.mask, finger_view.image, np.where(shifted_mask.view(bool), shifted, scene))
-    found = finger_mask(image.astype(np.float32), name="center")
+    found = finger_mask(with_neighbour_below(finger_view, other, 5, scene), name="center")
     assert mask_iou(found, finger_view.mask) > 0.97
 
 
@@ -101,11 +106,6 @@ def test_a_dim_finger_beside_a_brighter_neighbour_is_found(rendered_pair):
     That class is split again where the skin does not stand out from it, and the neighbour joined to the mask is cut
     away (measured IoU 0.994; docs/measurements.md, "A neighbouring finger in the frame"). A noise-only image still
     has no finger (tests/test_segment.py): its dark class is one level with a tail, not two."""
-    from fingersplat3d.segment.masks import finger_mask
-
-    size = (320, 256)
-    finger, other = (capture["left"] for capture in rendered_pair)
-    rows, other_rows = np.nonzero(finger.mask)[0], np.nonzero(other.mask)[0]
-    below = np.float32([[1, 0, 0], [0, 1, int(rows.max() - other_rows.min() - 10)]])  # its top 10 px hidden behind
-    image = np.where(finger.mask, finger.image, cv2.warpAffine(other.image, below, size))
-    assert mask_iou(finger_mask(image.astype(np.float32), name="left"), finger.mask) > 0.97
+    finger_view, other = (capture["left"] for capture in rendered_pair)
+    found = finger_mask(with_neighbour_below(finger_view, other, 10), name="left")
+    assert mask_iou(found, finger_view.mask) > 0.97

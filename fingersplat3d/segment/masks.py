@@ -35,7 +35,8 @@ any exposure: 16-bit data that only uses the bottom of the range works too):
 
 Measured on ``fs3d synth`` uwa views at 640x512 (docs/measurements.md, the phone close-up's section): IoU >= 0.9966
 (median 0.999) against the ground-truth mask sharp, >= 0.976 with the rims blurred by sigma 8 px; ~45 ms at 640x512 and
-~270 ms at 1280x1024 on the project's 2-core machine (under load).
+~270 ms at 1280x1024 on the project's 2-core machine (under load), and the neighbour check of step 6 11 / 44 ms more
+(Zen 3).
 
 It fails with an :class:`~fingersplat3d.errors.InputError` naming the image when there is no
 finger (an empty, constant or pure-noise image) or no background (the finger would cover
