@@ -164,6 +164,20 @@ def test_relative_errors_vanish_under_a_global_similarity():
     np.testing.assert_array_equal(view_pairs(4)[:3], [[0, 1], [0, 2], [0, 3]])
 
 
+def test_the_world_similarity_takes_a_reconstructions_world_onto_the_true_one():
+    from fingersplat3d.eval.poses import world_similarity
+
+    gt = _rig()
+    G, scale = _similarity(np.random.default_rng(6), 0.037)
+    pred = [_moved(pose, G, scale) for pose in gt]  # pred world = scale * G (true world)
+    found = world_similarity(pred, gt)
+    points = np.random.default_rng(7).normal(0, 30, (20, 3))
+    in_pred = scale * (points @ G[:3, :3].T + G[:3, 3])
+    np.testing.assert_allclose(found.apply(in_pred), points, atol=1e-6)
+    with pytest.raises(ValueError, match="two views"):
+        world_similarity(pred[:1], gt[:1])
+
+
 def test_relative_rotation_error_equals_a_known_perturbation():
     gt = _rig()
     pred = [pose.copy() for pose in gt]

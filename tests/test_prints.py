@@ -10,7 +10,7 @@ import pytest
 from fingersplat3d.cli import main
 from fingersplat3d.errors import EXIT_INCOMPLETE, EXIT_INPUT, InputError
 from fingersplat3d.eval.fingerprint import nbis_available
-from fingersplat3d.eval.rolled_truth import fit_minutiae_similarity, located_minutiae
+from fingersplat3d.eval.rolled_truth import fit_minutiae_similarity, located_minutiae, placed_minutiae
 from fingersplat3d.prints.enhance import gabor_enhance
 from fingersplat3d.prints.make import print_reconstruction
 from fingersplat3d.prints.skin_chart import finger_frame, skin_chart
@@ -104,6 +104,65 @@ def test_rows_of_the_chart_are_rings_where_the_surface_stops_raggedly():
     assert inner.sum() > 100 and np.ptp(offset) < 0.5
 
 
+def _oval(half_width=9.0, pad_depth=6.0, roll_deg=0.0, spread_deg=240.0, length=30.0, count=60000, seed=0):
+    """Points on a finger of oval section about +x (wider than deep), rolled by ``roll_deg`` about its axis, seen over
+    ``spread_deg`` about its own pad; and the pad's direction."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-length / 2, length / 2, count)
+    phi = np.radians(rng.uniform(-spread_deg / 2, spread_deg / 2, count))
+    roll = np.radians(roll_deg)
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(roll), -np.sin(roll)], [0.0, np.sin(roll), np.cos(roll)]])
+    points = np.stack([x, half_width * np.sin(phi), -pad_depth * np.cos(phi)], 1) @ turn.T
+    return points, turn @ np.array([0.0, 0.0, -1.0])
+
+
+@pytest.mark.parametrize("roll_deg", [-20.0, 0.0, 12.0, 25.0])
+def test_the_prints_centre_line_is_the_sections_mirror_line_whatever_the_fingers_roll(roll_deg):
+    # The cameras look at the pad from -z; the finger lies rolled in front of them. The print's centre line (b = 0)
+    # is the pad's own, so a finger gives one print whatever its roll in the rig (measured: tools/bench_print.py).
+    points, pad = _oval(roll_deg=roll_deg, spread_deg=270.0)  # three cameras 45 degrees apart see ~270 degrees
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    chart = skin_chart(points, finger_frame(points, cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0]))))
+    assert np.degrees(np.arccos(np.clip(chart.frame.pad @ pad, -1, 1))) < 1.5
+    assert chart.frame.pad_from == ("mirror line" if abs(roll_deg) > 1 else chart.frame.pad_from)
+    nodes, b = chart.points[chart.valid], chart.b[chart.valid]
+    across = np.cross(np.array([1.0, 0.0, 0.0]), pad)  # b grows toward the finger's own side
+    assert np.corrcoef(nodes @ across, b)[0, 1] > 0.95
+
+
+def test_a_surface_seen_only_over_its_pad_keeps_the_cameras_centre_line():
+    # Renders cropped to the pad (another group's, 120 degrees of skin): the flanks are not seen past their widest
+    # point, the section's widths cannot be read, and the radii alone are misled by the relief: no mirror line.
+    points, _ = _oval(roll_deg=15.0, spread_deg=120.0)
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    frame = finger_frame(points, cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0])))
+    chart = skin_chart(points, frame)
+    assert chart.frame.pad_from == "cameras" and chart.frame.pad @ frame.pad > np.cos(np.radians(1.0))
+
+
+def test_a_round_section_keeps_the_cameras_pad():
+    points = _cylinder()
+    cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
+    frame = finger_frame(points, cameras, _silhouette_axes(cameras, np.array([1.0, 0.0, 0.0])))
+    chart = skin_chart(points, frame)
+    assert chart.frame.pad_from == "cameras" and np.allclose(chart.frame.pad, frame.pad)
+
+
+def test_the_mirror_search_is_finite_at_the_extremes():
+    from fingersplat3d.prints.skin_chart import mirror_offset
+
+    assert mirror_offset(np.full((20, 180), np.nan)) is None
+    assert mirror_offset(np.full((20, 180), 7.0)) is None  # round: no line stands out
+    one = np.full((20, 180), np.nan)
+    one[:, 90] = 7.0
+    assert mirror_offset(one) is None  # a single meridian pairs only with itself
+    wide = np.full((20, 180), np.nan)
+    phi = -np.pi + (np.arange(180) + 0.5) * np.radians(2.0)
+    wide[:, 30:150] = (1e6 * np.hypot(np.sin(phi + 0.2), 0.6 * np.cos(phi + 0.2)))[30:150]  # huge radii stay finite
+    found = mirror_offset(wide)
+    assert found is not None and abs(found + 0.2) < np.radians(1.0)
+
+
 def test_too_few_points_make_no_chart():
     cameras = _ring_cameras(np.array([1.0, 0.0, 0.0]))
     with pytest.raises(InputError, match="too few"):
@@ -145,6 +204,31 @@ def test_the_similarity_fit_finds_a_turned_scaled_print_among_false_minutiae():
     score = located_minutiae(true_xy, true_deg, found_xy, found_deg, mask, shift + np.array([30.0, 20.0]))
     assert score.inside == 70 and 0.75 < score.located_share <= keep.mean() + 0.05
     assert abs(score.turn_deg - 3.0) < 0.5
+    # Several starts: the fit that locates most counts, wherever the right start is among them.
+    starts = np.array([shift + [150.0, -130.0], shift + [30.0, 20.0], shift + [-140.0, 90.0]])
+    several = located_minutiae(true_xy, true_deg, found_xy, found_deg, mask, starts)
+    assert several.located == score.located
+    assert located_minutiae(true_xy, true_deg, found_xy, found_deg, mask, starts[[0]]).located < score.located
+
+
+def test_placed_minutiae_scores_the_prints_geometry_after_one_similarity():
+    rng = np.random.default_rng(4)
+    rows, cols = np.mgrid[0:300, 0:260].astype(np.float64)
+    print_points = np.stack([cols * 0.05, rows * 0.05, np.zeros_like(cols)], -1)  # a flat print, 0.05 mm a pixel
+    mask = np.ones((300, 260), bool)
+    print_points[:, :20] = np.nan
+    where = rng.uniform([40, 40], [240, 280], (60, 2))  # (x, y) print pixels
+    xyz = np.column_stack([where * 0.05, np.full(60, 0.2)])  # 0.2 mm off the surface
+    turn, scale = np.radians(-4.0), 0.97
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]]) / scale
+    true_xy = (where - 100.0) @ rotation.T + np.array([300.0, 40.0])  # the true print: turned, scaled, shifted
+    true_xy[:10] += rng.choice([-1.0, 1.0], (10, 2)) * 20.0  # ten the chart put in the wrong place
+    far = np.array([[5.0, 5.0, 3.0]])  # off the print's surface: not inside
+    score = placed_minutiae(print_points, mask, np.vstack([xyz, far]), np.vstack([true_xy, [[0.0, 0.0]]]), max_gap=1.0)
+    assert score.inside == 60 and score.located == 50
+    assert score.scale == pytest.approx(scale, abs=0.01) and score.turn_deg == pytest.approx(4.0, abs=0.2)
+    blank = placed_minutiae(np.full((50, 50, 3), np.nan), np.zeros((50, 50), bool), xyz, true_xy, max_gap=1.0)
+    assert blank.inside == 0 and np.isnan(blank.located_share)
 
 
 def test_the_rolled_print_of_a_true_model_is_a_500_ppi_print_of_its_skin():
@@ -161,13 +245,22 @@ def test_the_rolled_print_of_a_true_model_is_a_500_ppi_print_of_its_skin():
     # Neighbouring print pixels are neighbouring skin: 1 px at 500 ppi is 0.05 mm.
     step = np.linalg.norm(np.diff(result.points, axis=1), axis=-1)
     assert np.nanmedian(step) == pytest.approx(25.4 / 500, rel=0.15)
+    # Its chart puts the skin where the finger's true rolled print has it: the true minutiae within 8 px after one
+    # similarity (93 %; 83 % centred on the cameras' direction, 17 degrees off this finger's pad; not all: the
+    # generator counts rows from the tip's pole, the chart from one ring).
+    truth = json.loads((SAMPLE / "minutiae.json").read_text())
+    xy = {m["id"]: m["xy"] for m in truth["rolled_print"]["minutiae"]}
+    both = [m for m in truth["minutiae_3d"] if m["id"] in xy]
+    placed = placed_minutiae(result.points, result.mask, np.array([m["xyz"] for m in both]),
+                             np.array([xy[m["id"]] for m in both]), max_gap=1.0)
+    assert placed.inside > 40 and placed.located_share > 0.88 and placed.scale == pytest.approx(1.0, abs=0.03)
 
 
 @pytest.mark.skipif(not nbis_available(), reason="needs nbis-py (NIST mindtct)")
 def test_the_rolled_print_of_a_true_model_finds_the_true_minutiae():
     from fingersplat3d.eval.contact import ContactImage
     from fingersplat3d.eval.fingerprint import analyse
-    from fingersplat3d.eval.rolled_truth import template_shift
+    from fingersplat3d.eval.rolled_truth import SEARCH_PX, START_PEAKS, template_shift
 
     result, _, _ = print_reconstruction(SAMPLE)
     found = analyse(ContactImage(result.image, np.array([[1.0, 0, 0], [0, 1.0, 0]]), 9.0, 1.0), nfiq2=False)
@@ -176,9 +269,12 @@ def test_the_rolled_print_of_a_true_model_finds_the_true_minutiae():
     xy = np.array([m["xy"] for m in truth["minutiae"]])
     degrees = np.array([m["angle_deg"] for m in truth["minutiae"]])
     score = located_minutiae(xy, degrees, found.minutiae[:, :2], found.minutiae[:, 2], result.mask,
-                             template_shift(result.image, true_image))
+                             template_shift(result.image, true_image, count=START_PEAKS))
     assert score.inside > 40
     assert score.located_share > 0.5  # 74 % measured on this 640x512 sample
+    peaks = template_shift(result.image, true_image, count=3)
+    assert peaks.shape == (3, 2) and np.array_equal(peaks[0], template_shift(result.image, true_image))
+    assert np.all(np.linalg.norm(peaks[1:] - peaks[0], axis=1) >= SEARCH_PX)
     assert score.scale == pytest.approx(1.0, abs=0.05)
 
 

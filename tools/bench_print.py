@@ -7,7 +7,8 @@ Per seed: ``fs3d synth`` (three views at -45/0/+45 degrees on the uwa rig), a ge
 photos alone (no cameras; with the photos' true pixels per mm at the finger when ``--scale truth``, as a
 calibrated rig knows it, else the print is scaled by the ridge period), ``fs3d print`` of the
 reconstruction, then against the finger's true ``rolled_print.png``: the share of true minutiae inside the
-print that mindtct finds within 8 px after a similarity fit (:mod:`fingersplat3d.eval.rolled_truth`),
+print that mindtct finds within 8 px after a similarity fit, and those the print's geometry alone puts within 8 px
+(*placed*: carried through its map of 3D points; :mod:`fingersplat3d.eval.rolled_truth`),
 bozorth3 against its own true print (genuine) and the other seeds' (impostor), the coverage in degrees
 of roll, NFIQ2, and the print's time. Prints a markdown table; ``--out`` keeps the prints.
 """
@@ -28,7 +29,7 @@ def main() -> int:
     from fingersplat3d.eval.contact import ContactImage
     from fingersplat3d.eval.fingerprint import analyse, match_score
     from fingersplat3d.eval.machine import machine
-    from fingersplat3d.eval.rolled_truth import located_minutiae, template_shift
+    from fingersplat3d.eval.rolled_truth import START_PEAKS, located_minutiae, template_shift
     from fingersplat3d.io.capture import read_capture, write_capture
     from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
     from fingersplat3d.prints.make import nfiq2_region, print_reconstruction
@@ -70,13 +71,15 @@ def main() -> int:
             true_xy = np.array([m["xy"] for m in rolled.minutiae]).reshape(-1, 2)
             true_deg = np.array([m["angle_deg"] for m in rolled.minutiae])
             half_width_px = rolled.image.shape[1] / 2.0
-            shift = template_shift(result.image, rolled.image)
+            shift = template_shift(result.image, rolled.image, count=START_PEAKS)
             if shift is None:
                 shift = np.array(result.origin_px) - np.array([half_width_px, 0.0])
             score = located_minutiae(true_xy, true_deg, found.minutiae[:, :2], found.minutiae[:, 2], result.mask, shift)
+            placed = _placed(synth, reconstruction, result)
             truths[seed], prints[seed] = truth, found
-            rows.append({"seed": seed, "located": score.located_share, "inside": score.inside, "scale": score.scale,
-                         "turn": score.turn_deg, "residual": score.residual_px, "coverage": result.coverage_deg,
+            rows.append({"seed": seed, "located": score.located_share, "placed": placed.located_share,
+                         "inside": score.inside, "scale": score.scale, "turn": score.turn_deg,
+                         "residual": score.residual_px, "coverage": result.coverage_deg,
                          "nfiq2": quality, "found": found.count, "seconds": seconds, "scale_from": scale_from})
             if args.out:
                 args.out.mkdir(parents=True, exist_ok=True)
@@ -90,17 +93,39 @@ def main() -> int:
         row["impostor"] = max(row["impostors"], default=0)
     print(f"Machine: {info['cpu']}, {info['cores']} cores; {args.rig} rig {args.size}, scale from {args.scale}; "
           f"enhancer {args.enhance}.\n")
-    print("| seed | true minutiae inside | located within 8 px | fit scale | bozorth3 genuine | bozorth3 impostor (max) "
-          "| coverage ° | NFIQ2 | mindtct minutiae | print s |\n|---|---|---|---|---|---|---|---|---|---|")
+    print("| seed | true minutiae inside | located within 8 px | placed within 8 px | fit scale | bozorth3 genuine "
+          "| bozorth3 impostor (max) | coverage ° | NFIQ2 | mindtct minutiae | print s |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['seed']} | {r['inside']} | {100 * r['located']:.0f} % | {r['scale']:.3f} | {r['genuine']} | {r['impostor']} | "
-              f"{r['coverage']:.0f} | {r['nfiq2'] if r['nfiq2'] is None else round(r['nfiq2'])} | {r['found']} | {r['seconds']:.1f} |")
+        print(f"| {r['seed']} | {r['inside']} | {100 * r['located']:.0f} % | {100 * r['placed']:.0f} % "
+              f"| {r['scale']:.3f} "
+              f"| {r['genuine']} | {r['impostor']} | {r['coverage']:.0f} "
+              f"| {r['nfiq2'] if r['nfiq2'] is None else round(r['nfiq2'])} | {r['found']} | {r['seconds']:.1f} |")
     median = lambda key: float(np.median([r[key] for r in rows]))  # noqa: E731
     impostors = [score for r in rows for score in r["impostors"]]
-    print(f"| median | {median('inside'):.0f} | {100 * median('located'):.0f} % | {median('scale'):.3f} | {median('genuine'):.0f} | "
-          f"{float(np.median(impostors)) if impostors else float('nan'):.0f} (all {len(impostors)}) | {median('coverage'):.0f} | | | "
-          f"{median('seconds'):.1f} |")
+    print(f"| median | {median('inside'):.0f} | {100 * median('located'):.0f} % | {100 * median('placed'):.0f} % "
+          f"| {median('scale'):.3f} | {median('genuine'):.0f} "
+          f"| {float(np.median(impostors)) if impostors else float('nan'):.0f} (all {len(impostors)}) "
+          f"| {median('coverage'):.0f} | | | {median('seconds'):.1f} |")
     return 0
+
+
+def _placed(synth, reconstruction: Path, result):
+    """The print's geometry against the truth (``placed_minutiae``): the true minutiae carried into the model's frame by
+    the similarity between its cameras and the true ones."""
+    from fingersplat3d.eval.poses import world_similarity
+    from fingersplat3d.eval.rolled_truth import placed_minutiae
+    from fingersplat3d.io.cameras import read_cameras
+
+    model = read_cameras(reconstruction / "cameras.json").cameras
+    names = [view.name for view in synth.capture.views if view.name in model]
+    to_truth = world_similarity([model[name].world_to_cam for name in names],
+                                [synth.capture[name].camera.world_to_cam for name in names])
+    xy = {m["id"]: m["xy"] for m in synth.rolled.minutiae}
+    both = [m for m in synth.minutiae["minutiae_3d"] if m["id"] in xy]
+    true_xyz = to_truth.inverse().apply(np.array([m["xyz"] for m in both]).reshape(-1, 3))
+    true_xy = np.array([xy[m["id"]] for m in both]).reshape(-1, 2)
+    return placed_minutiae(result.points, result.mask, true_xyz, true_xy, max_gap=1.0 / to_truth.scale)  # 1 mm
 
 
 if __name__ == "__main__":

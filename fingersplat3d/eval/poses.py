@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 __all__ = ["rotation_angle_deg", "vector_angle_deg", "view_pairs", "relative_rotation_errors",
-           "translation_direction_errors"]
+           "translation_direction_errors", "world_similarity"]
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray | float:
@@ -113,3 +113,27 @@ def translation_direction_errors(pred_world_to_cam: Sequence[np.ndarray] | np.nd
         t_ij[np.linalg.norm(t_ij, axis=1) <= 1e-9 * size] = 0.0
         baselines.append(t_ij)
     return np.atleast_1d(vector_angle_deg(*baselines))
+
+
+def world_similarity(pred_world_to_cam: Sequence[np.ndarray] | np.ndarray,
+                     gt_world_to_cam: Sequence[np.ndarray] | np.ndarray):
+    """The :class:`~fingersplat3d.align.solve.procrustes.Similarity` taking the predicted world onto the true one.
+
+    Its rotation is the chordal mean of ``R_gt_i^T R_pred_i`` over the views; its scale and shift the least-squares
+    fit of the camera centres under that rotation (a world is a similarity away from the other: two views or more with
+    distinct centres fix it). For scoring what a reconstruction made (a print's points, a surface) in the true frame.
+    """
+    from ..align.solve.procrustes import Similarity
+
+    pred, gt = _both(pred_world_to_cam, gt_world_to_cam)
+    if len(pred) < 2:
+        raise ValueError("a world's scale needs two views or more")
+    u, _, vt = np.linalg.svd(np.einsum("nba,nbc->ac", gt[:, :3, :3], pred[:, :3, :3]))
+    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    centres = [-np.einsum("nba,nb->na", poses[:, :3, :3], poses[:, :3, 3]) for poses in (pred, gt)]
+    turned = (centres[0] - centres[0].mean(0)) @ rotation.T
+    spread = float((turned ** 2).sum())
+    if not spread > 0:
+        raise ValueError("the predicted cameras share one centre: the world's scale is undetermined")
+    scale = float((turned * (centres[1] - centres[1].mean(0))).sum() / spread)
+    return Similarity(scale, rotation, centres[1].mean(0) - scale * rotation @ centres[0].mean(0))

@@ -20,6 +20,13 @@ of the model's surface two such distances:
    stations ``x`` along the axis and azimuths ``phi`` around it (2 degree cells; the station step is
    the arc of one cell at the median radius, so cells are square on the skin), smoothed by a
    normalised Gaussian of :data:`SMOOTHING_CELLS` (holes of a cell or two filled), azimuth periodic.
+   **The pad's centre line** (``phi = 0``, the print's middle) is then moved onto the section's mirror line, the
+   azimuth about which its widths are symmetric (:func:`mirror_offset`), and the grid made again: the cameras' mean
+   direction is where the finger happened to face, not its pad's middle. A finger lying rolled in the rig had its
+   print's rows drift sideways wherever the section narrows (the taper, the tip), a shear no similarity takes out
+   (measured on 15 synthetic fingers, the true minutiae the print's geometry puts within 8 px: median 84 -> 91 %;
+   tools/bench_print.py). A round section, or flanks not seen past their widest point, give no such line: the
+   cameras' direction stays (``FingerFrame.pad_from``).
 4. **Arc lengths.** ``b``: around each ring from the pad's centre line (``phi = 0``), the summed
    lengths of the grid's segments, signed toward ``side``; ``a``: along each meridian from the ring
    that most meridians cross, growing toward the base (the print is drawn tip up). Rolling turns the
@@ -49,6 +56,15 @@ __all__ = ["FingerFrame", "SkinChart", "finger_frame", "skin_chart", "PHI_STEP_D
 PHI_STEP_DEG = 2.0  # azimuth cell of the radius grid
 AXIS_ROUNDS = 2  # times the axis is turned onto the fitted centre line (step 2)
 MIN_POINTS = 200  # fewer model points than this make no chart
+MIRROR_SEARCH_DEG = 30  # how far from the cameras' mean direction the section's mirror line is looked for (degrees)
+MIRROR_LOOK_DEG = 60  # the section's widths are read from looks this far either side of it (degrees)
+MIRROR_MIN_RINGS = 5  # a look's width is used where this many rings are read, and
+MIRROR_MIN_SHARE = 0.3  # this share of all the rings
+MIRROR_SPAN_DEG = 30  # a mirror position pairs looks up to this far either side of it (degrees)
+MIRROR_PAIRS = 15  # a mirror position is scored on this many pairs of looks or more
+MIRROR_MIN_SPREAD = 0.02  # widths that vary less than this (relative) over the looks read: a round section, no line
+MIRROR_CONTRAST = 0.5  # the mirror's score against the median position's: above, no mirror line (a round section)
+MIRROR_MIN_DEG = 0.5  # a mirror line nearer phi = 0 than this leaves the chart as it is
 SMOOTHING_CELLS = 2.5
 """Gaussian smoothing of the radius grid, in cells (~0.7 mm on an adult finger): depth rendered from Gaussians is
 rough at the ridges' scale, and a chart that followed it would shift the photos' ridges by a fraction of a period
@@ -65,6 +81,7 @@ class FingerFrame:
     side: np.ndarray  # [3] unit, axis x pad: b grows this way
     origin: np.ndarray  # [3]
     axis_from: str  # "silhouettes" | "points"
+    pad_from: str = "cameras"  # "cameras" | "mirror line": where phi = 0 was taken from (module docstring, step 3)
 
     def local(self, points: np.ndarray) -> np.ndarray:
         """World points ``[..., 3]`` -> ``(x along the axis, u toward the pad, w toward the side)``."""
@@ -142,7 +159,13 @@ def _turned(frame: FingerFrame, slope: np.ndarray) -> FingerFrame:
     axis = axis / np.linalg.norm(axis)
     pad = frame.pad - (frame.pad @ axis) * axis
     pad = pad / np.linalg.norm(pad)
-    return FingerFrame(axis, pad, np.cross(axis, pad), frame.origin, frame.axis_from)
+    return FingerFrame(axis, pad, np.cross(axis, pad), frame.origin, frame.axis_from, frame.pad_from)
+
+
+def _rolled(frame: FingerFrame, angle: float) -> FingerFrame:
+    """``frame`` with its pad turned by ``angle`` radians about the axis, toward ``side`` (onto the mirror line)."""
+    pad = np.cos(angle) * frame.pad + np.sin(angle) * frame.side
+    return FingerFrame(frame.axis, pad, np.cross(frame.axis, pad), frame.origin, frame.axis_from, "mirror line")
 
 
 def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
@@ -175,8 +198,9 @@ def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
     return coefficients
 
 
-def skin_chart(points: np.ndarray, frame: FingerFrame) -> SkinChart:
-    """The chart of the surface sampled by ``points [N, 3]`` in ``frame`` (module docstring, steps 2-4)."""
+def skin_chart(points: np.ndarray, frame: FingerFrame, mirror: bool = True) -> SkinChart:
+    """The chart of the surface sampled by ``points [N, 3]`` in ``frame`` (module docstring, steps 2-4); ``mirror``:
+    phi = 0 moved onto the section's mirror line where it has one (step 3)."""
     points = np.asarray(points, np.float64)
     points = points[np.isfinite(points).all(1)]
     if len(points) < MIN_POINTS:
@@ -209,6 +233,10 @@ def skin_chart(points: np.ndarray, frame: FingerFrame) -> SkinChart:
     rho = ndimage.gaussian_filter(mean * (count > 0), **smooth) / np.maximum(weight, 1e-12)
     near = ndimage.binary_dilation(count > 0, structure=np.ones((3, 3), bool), iterations=1)
     rho = np.where(near & (weight > 0.15), rho, np.nan)
+    if mirror:
+        offset = mirror_offset(rho)
+        if offset is not None and abs(offset) > np.radians(MIRROR_MIN_DEG):
+            return skin_chart(points, _rolled(frame, offset), mirror=False)
     x = low + (np.arange(stations) + 0.5) * step
     phi = -np.pi + (np.arange(columns) + 0.5) * phi_step
     cu_s, cw_s = (np.polyval(centre[:, c], x) for c in (0, 1))
@@ -216,6 +244,71 @@ def skin_chart(points: np.ndarray, frame: FingerFrame) -> SkinChart:
                             cw_s[:, None] + rho * np.sin(phi)[None, :]], -1)
     nodes = frame.world(local_nodes)
     return SkinChart(frame, nodes, _normals(nodes, frame), *_arc_lengths(nodes, phi), x, phi)
+
+
+def mirror_offset(rho: np.ndarray) -> float | None:
+    """The azimuth (radians, toward ``side``) of the section's mirror line (module docstring, step 3), or None.
+
+    Seen from azimuth ``look``, a ring's width is the spread of its nodes across that direction; a section mirrored
+    about ``theta0`` is as wide from ``theta0 + d`` as from ``theta0 - d``. Widths are read only where both extremes
+    are inside the surface (a neighbour on either side): an extreme at the surface's edge is where the views stopped,
+    not the flank's widest point. Each ring's widths are taken relative to its own median, and per ``look`` their
+    median over the rings (a look read by fewer than :data:`MIRROR_MIN_RINGS` of them, or :data:`MIRROR_MIN_SHARE` of
+    all, is not used). Mirror positions within :data:`MIRROR_SEARCH_DEG`, in degrees, are scored by the mean squared
+    difference of the widths they pair up to :data:`MIRROR_SPAN_DEG` either side (:data:`MIRROR_PAIRS` pairs or more);
+    the best is refined by a parabola. None where the widths vary by less than :data:`MIRROR_MIN_SPREAD` over the looks
+    or the best does not stand out (above :data:`MIRROR_CONTRAST` times the median score): a section too round to
+    have a line; where the best is at the search's edge; or where no look is read (the flanks not seen past their
+    widest point, as in renders cropped to the pad). The flanks are what the silhouettes hold; the radii's
+    own symmetry, tried first, was misled by the relief of another group's renders (a line 8-10 degrees off on every
+    triplet of a finger whose silhouettes are symmetric about its middle render).
+    """
+    stations, columns = rho.shape
+    phi = -np.pi + (np.arange(columns) + 0.5) * np.radians(PHI_STEP_DEG)
+    valid = np.isfinite(rho)
+    radius = np.where(valid, rho, 0.0)
+    inner = valid & np.roll(valid, 1, 1) & np.roll(valid, -1, 1)
+    rows = np.arange(stations)
+    looks = np.arange(-MIRROR_LOOK_DEG, MIRROR_LOOK_DEG + 1)
+    widths = np.full((len(looks), stations), np.nan)
+    for index, look in enumerate(np.radians(looks)):
+        across = radius * np.sin(phi - look)[None, :]
+        high = np.argmax(np.where(valid, across, -np.inf), 1)
+        low = np.argmin(np.where(valid, across, np.inf), 1)
+        read = inner[rows, high] & inner[rows, low]
+        widths[index, read] = (across[rows, high] - across[rows, low])[read]
+    read = np.isfinite(widths)
+    rings = read.any(0)
+    if not rings.any():
+        return None
+    typical = np.array([np.median(widths[read[:, ring], ring]) for ring in np.flatnonzero(rings)])
+    relative = widths[:, rings] / typical
+    enough = read[:, rings].sum(1) >= max(MIRROR_MIN_RINGS, MIRROR_MIN_SHARE * stations)
+    profile = np.full(len(looks), np.nan)
+    for index in np.flatnonzero(enough):
+        finite = relative[index][np.isfinite(relative[index])]
+        profile[index] = np.median(finite) if finite.size else np.nan
+    if not np.any(np.isfinite(profile)) or np.nanmax(profile) - np.nanmin(profile) < MIRROR_MIN_SPREAD:
+        return None
+    centres = np.arange(-MIRROR_SEARCH_DEG, MIRROR_SEARCH_DEG + 1)
+    cost = np.full(len(centres), np.inf)
+    offsets = np.arange(1, MIRROR_SPAN_DEG + 1)
+    for index, centre in enumerate(centres):
+        ahead, behind = centre + offsets + MIRROR_LOOK_DEG, centre - offsets + MIRROR_LOOK_DEG  # indices into looks
+        inside = (ahead < len(looks)) & (behind >= 0)
+        pairs = profile[ahead[inside]], profile[behind[inside]]
+        both = np.isfinite(pairs[0]) & np.isfinite(pairs[1])
+        if both.sum() >= MIRROR_PAIRS:
+            cost[index] = float(np.mean((pairs[0][both] - pairs[1][both]) ** 2))
+    scored = cost[np.isfinite(cost)]
+    best = int(np.argmin(cost))
+    if (not scored.size or best in (0, len(cost) - 1) or not np.median(scored) > 0
+            or cost[best] > MIRROR_CONTRAST * np.median(scored)):
+        return None
+    before, here, after = cost[best - 1:best + 2]
+    curvature = before - 2 * here + after
+    fraction = 0.5 * (before - after) / curvature if np.isfinite(curvature) and curvature > 0 else 0.0
+    return float(np.radians(centres[best] + np.clip(fraction, -0.5, 0.5)))
 
 
 def _derivative(nodes: np.ndarray, axis: int, wrap: bool) -> np.ndarray:
