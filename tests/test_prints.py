@@ -299,6 +299,7 @@ def test_fs3d_print_writes_prints_and_lists_what_failed(tmp_path, capsys):
     rows = {row["name"]: row for row in csv.DictReader((out / "prints.csv").open())}
     assert rows["uwa_seed1"]["status"] == "done" and rows["uwa_seed1"]["kind"] == "rolled"
     assert float(rows["uwa_seed1"]["coverage_deg"]) >= 150
+    assert rows["uwa_seed1"]["centred_on"] == "mirror line"  # the sample's finger lies rolled 17 degrees in its rig
     assert rows["center"]["status"] == "done" and rows["center"]["kind"] == "photo"
     assert "not a reconstruction folder" in rows["empty"]["reason"]
     assert "no depth maps" in rows["nodepth"]["reason"]

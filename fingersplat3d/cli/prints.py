@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     small = [row for row in rows if row["status"] == "too small"]
     for row in rows:
         if row["status"] != "failed":
-            extra = f", {row['coverage_deg']:.0f} degrees of roll" if row["kind"] == "rolled" else ""
+            centre = "the pad's mirror line" if row.get("centred_on") == "mirror line" else "the cameras' direction"
+            extra = f", {row['coverage_deg']:.0f} degrees of roll centred on {centre}" if row["kind"] == "rolled" else ""
             score = f", NFIQ2 {row['nfiq2']}" if row.get("nfiq2") not in (None, "") else ""
             print(f"{row['name']}: {row['kind']} print {row['width_px']}x{row['height_px']} px{extra}{score}")
     print(f"wrote {args.output}")

@@ -34,7 +34,7 @@ __all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "pri
 ROLLED_PPI = 500.0
 PERIOD_SLACK = 0.03  # a print scaled by the ridge period is redone when its own period is off by more than this
 COLUMNS = ("name", "source", "kind", "status", "reason", "ppi", "scale_from", "width_px", "height_px", "area_mm2",
-           "coverage_deg", "nfiq2", "minutiae", "nfiq2_note", "seconds")
+           "coverage_deg", "centred_on", "nfiq2", "minutiae", "nfiq2_note", "seconds")
 PICTURE_HEIGHT = 480
 POINTS_PER_VIEW = 80_000  # model points per view the chart is made from (the depth map, strided)
 
@@ -162,7 +162,8 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
                                                              enhancer=enhancer)
             image, mask, centre_x = result.image, result.mask, result.origin_px[0]
             per_mm = ppi / 25.4
-            row.update(kind="rolled", ppi=ppi, scale_from=scale_from, coverage_deg=round(result.coverage_deg, 1))
+            row.update(kind="rolled", ppi=ppi, scale_from=scale_from, coverage_deg=round(result.coverage_deg, 1),
+                       centred_on=result.centred_on)
             points = result.points[:, ::-1] if mirror else result.points
             (out / "points").mkdir(exist_ok=True)
             np.save(out / "points" / f"{name}.npy", np.ascontiguousarray(points))
@@ -170,7 +171,7 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
             contact, photo = print_photo(source, ridges=ridges)
             image, mask, centre_x = contact.image, contact.image < 255, None
             per_mm = ROLLED_PPI / 25.4
-            row.update(kind="photo", ppi=ROLLED_PPI, scale_from="ridge period", coverage_deg="")
+            row.update(kind="photo", ppi=ROLLED_PPI, scale_from="ridge period", coverage_deg="", centred_on="")
         else:
             raise InputError(f"{source}: no such file or folder")
     except (FS3DError, OSError, ValueError) as error:

@@ -82,6 +82,7 @@ class RolledEquivalent:
     view_share: dict  # view name -> share of the print's pixels it dominates
     period_px: float  # the print's ridge period
     origin_px: tuple[float, float]  # print pixel (x, y) of the chart's origin: the pad's centre line (b = 0) at a = 0
+    centred_on: str = "cameras"  # where the pad's centre line came from: "mirror line" | "cameras" (skin_chart step 3)
 
     @property
     def area_px(self) -> int:
@@ -145,7 +146,7 @@ def rolled_print(chart: SkinChart, views: Sequence[PrintView], px_per_unit: floa
     share = {view.name: float(np.mean(dominant[inked] == k)) for k, view in enumerate(views)}
     point_map = np.where(mask[..., None], points.reshape(height, width, 3), np.nan).astype(np.float32)
     return RolledEquivalent(image, mask, point_map, float(px_per_unit), _coverage(chart, views), share, float(period),
-                            (float(-low[0]), float(-low[1])))
+                            (float(-low[0]), float(-low[1])), chart.frame.pad_from)
 
 
 def _view_weights(points: np.ndarray, normals: np.ndarray, view: PrintView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
