@@ -57,7 +57,8 @@ class TruthScore:
 def template_shift(printed: np.ndarray, truth: np.ndarray, count: int = 1) -> np.ndarray | None:
     """``(dx, dy)`` taking true-print pixels to the print's where the middle half of ``truth`` (uint8, 255 outside)
     correlates best with ``printed`` (normalised cross-correlation); None when the print is smaller than that patch.
-    ``count > 1``: the ``[count, 2]`` best peaks, best first, each :data:`SEARCH_PX` or more from those before it."""
+    ``count > 1``: the ``[count, 2]`` best peaks (or fewer), best first, each :data:`SEARCH_PX` or more from those
+    before it."""
     import cv2
 
     height, width = truth.shape
@@ -76,6 +77,8 @@ def template_shift(printed: np.ndarray, truth: np.ndarray, count: int = 1) -> np
         peaks.append([col - left, row - top])
         rows, cols = np.ogrid[:scores.shape[0], :scores.shape[1]]
         scores[np.hypot(rows - row, cols - col) < SEARCH_PX] = -np.inf
+    if not peaks:  # no correlation anywhere (a blank print)
+        return None
     return np.array(peaks[0] if count == 1 else peaks, np.float64)
 
 
