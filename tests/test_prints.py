@@ -40,12 +40,21 @@ def _silhouette_axes(cameras, axis):
     return found
 
 
-def _cylinder(radius=8.0, length=30.0, spread_deg=240.0, count=60000, seed=0):
-    """Points on a cylinder about +x (tip at x = length / 2), azimuth spread about the pad (-z)."""
+def _oval(half_width=9.0, pad_depth=6.0, roll_deg=0.0, spread_deg=240.0, length=30.0, count=60000, seed=0):
+    """Points on a finger of oval section about +x (``half_width`` across, ``pad_depth`` deep), rolled by ``roll_deg``
+    about its axis, seen over ``spread_deg`` about its own pad; and the pad's direction."""
     rng = np.random.default_rng(seed)
     x = rng.uniform(-length / 2, length / 2, count)
     phi = np.radians(rng.uniform(-spread_deg / 2, spread_deg / 2, count))
-    return np.stack([x, radius * np.sin(phi), -radius * np.cos(phi)], 1)
+    roll = np.radians(roll_deg)
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(roll), -np.sin(roll)], [0.0, np.sin(roll), np.cos(roll)]])
+    points = np.stack([x, half_width * np.sin(phi), -pad_depth * np.cos(phi)], 1) @ turn.T
+    return points, turn @ np.array([0.0, 0.0, -1.0])
+
+
+def _cylinder(radius=8.0, length=30.0, spread_deg=240.0, count=60000, seed=0):
+    """Points on a cylinder about +x (tip at x = length / 2), azimuth spread about the pad (-z)."""
+    return _oval(radius, radius, 0.0, spread_deg, length, count, seed)[0]
 
 
 def test_the_axis_comes_from_the_silhouettes_and_points_to_the_tip():
@@ -102,18 +111,6 @@ def test_rows_of_the_chart_are_rings_where_the_surface_stops_raggedly():
     inner = np.abs(nodes[:, 0]) < 5  # every meridian's nodes here, clear of where any of them stops
     offset = chart.a[chart.valid][inner] + nodes[inner, 0]
     assert inner.sum() > 100 and np.ptp(offset) < 0.5
-
-
-def _oval(half_width=9.0, pad_depth=6.0, roll_deg=0.0, spread_deg=240.0, length=30.0, count=60000, seed=0):
-    """Points on a finger of oval section about +x (wider than deep), rolled by ``roll_deg`` about its axis, seen over
-    ``spread_deg`` about its own pad; and the pad's direction."""
-    rng = np.random.default_rng(seed)
-    x = rng.uniform(-length / 2, length / 2, count)
-    phi = np.radians(rng.uniform(-spread_deg / 2, spread_deg / 2, count))
-    roll = np.radians(roll_deg)
-    turn = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(roll), -np.sin(roll)], [0.0, np.sin(roll), np.cos(roll)]])
-    points = np.stack([x, half_width * np.sin(phi), -pad_depth * np.cos(phi)], 1) @ turn.T
-    return points, turn @ np.array([0.0, 0.0, -1.0])
 
 
 @pytest.mark.parametrize("roll_deg", [-20.0, 0.0, 12.0, 25.0])

@@ -123,13 +123,14 @@ def world_similarity(pred_world_to_cam: Sequence[np.ndarray] | np.ndarray,
     fit of the camera centres under that rotation (a world is a similarity away from the other: two views or more with
     distinct centres fix it). For scoring what a reconstruction made (a print's points, a surface) in the true frame.
     """
+    from scipy.spatial.transform import Rotation
+
     from ..align.solve.procrustes import Similarity
 
     pred, gt = _both(pred_world_to_cam, gt_world_to_cam)
     if len(pred) < 2:
         raise ValueError("a world's scale needs two views or more")
-    u, _, vt = np.linalg.svd(np.einsum("nba,nbc->ac", gt[:, :3, :3], pred[:, :3, :3]))
-    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    rotation = Rotation.from_matrix(np.swapaxes(gt[:, :3, :3], 1, 2) @ pred[:, :3, :3]).mean().as_matrix()
     centres = [-np.einsum("nba,nb->na", poses[:, :3, :3], poses[:, :3, 3]) for poses in (pred, gt)]
     turned = (centres[0] - centres[0].mean(0)) @ rotation.T
     spread = float((turned ** 2).sum())

@@ -75,6 +75,8 @@ def template_shift(printed: np.ndarray, truth: np.ndarray, count: int = 1) -> np
         if not np.isfinite(scores[row, col]):
             break
         peaks.append([col - left, row - top])
+        if len(peaks) == count:
+            break
         rows, cols = np.ogrid[:scores.shape[0], :scores.shape[1]]
         scores[np.hypot(rows - row, cols - col) < SEARCH_PX] = -np.inf
     if not peaks:  # no correlation anywhere (a blank print)

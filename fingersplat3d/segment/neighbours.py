@@ -107,4 +107,3 @@ def _beyond_the_outline(mask: np.ndarray, body: np.ndarray, other: np.ndarray, w
     cut = np.zeros_like(mask)
     cut[all_rows[beyond], all_cols[beyond]] = True
     return cut
-
