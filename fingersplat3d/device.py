@@ -12,13 +12,16 @@ import os
 from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator, Sequence, TypeVar
 
 import torch
 
 from .errors import InputError
 
-__all__ = ["resolve_device", "cpu_threads", "numba_threads", "use_threads", "single_threaded"]
+Item = TypeVar("Item")
+Result = TypeVar("Result")
+
+__all__ = ["resolve_device", "cpu_threads", "numba_threads", "use_threads", "single_threaded", "per_item"]
 
 
 def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
@@ -114,3 +117,19 @@ def single_threaded() -> Iterator[None]:
     finally:
         torch.set_num_threads(torch_threads)
         cv2.setNumThreads(cv_threads)
+
+
+def per_item(function: Callable[[Item], Result], items: Sequence[Item]) -> list[Result]:
+    """``[function(item) for item in items]``, the items on :func:`cpu_threads` threads at once with the libraries
+    under them on one thread each (:func:`single_threaded`): for a capture's few views, whose per-view work (masks,
+    ridge periods, pointmaps, clouds) is OpenCV, numpy and Open3D calls that release the GIL, each one too small for
+    those libraries' own threads to pay. The results are in the items' order and the same as one at a time; the
+    first item (in order) whose call raises raises here."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    items = list(items)
+    threads = min(cpu_threads(), len(items))
+    if threads <= 1:
+        return [function(item) for item in items]
+    with single_threaded(), ThreadPoolExecutor(threads) as pool:
+        return list(pool.map(function, items))

@@ -23,7 +23,7 @@ from .align.solve.global_opt import GlobalAlignment, global_align
 from .align.solve.icp import ICPConfig, refine_poses
 from .align.solve.rig import Rig, RigCapture
 from .align.transfer import MIN_PARALLAX_DEG, backed_shares, multi_view_backing
-from .device import resolve_device
+from .device import per_item, resolve_device
 from .errors import InputError
 from .sampling import map_on_grid
 from .scene import Camera, Capture, View
@@ -590,8 +590,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         confidences = [pm.confidence for pm in pointmaps]
         aligned = [v for v in range(len(capture)) if alignment.aligned[v]] or [alignment.root]
         with step("icp"):
-            clouds = [_world_cloud(view, cameras[v], depths[v], confidences[v], config.min_confidence)
-                      for v, view in enumerate(capture.views)]
+            clouds = per_item(lambda v: _world_cloud(capture.views[v], cameras[v], depths[v], confidences[v],
+                                                     config.min_confidence), range(len(capture)))
             if config.icp and len(aligned) >= 2:
                 _refine_with_icp(capture, cameras, clouds, aligned, alignment.root, config, report)
         bar.update()

@@ -165,20 +165,23 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
     """
     if ridge_px is not None and not (np.isfinite(ridge_px) and ridge_px > 0):
         raise InputError(f"pixels per ridge must be a positive number, got {ridge_px}")
-    surveys = [_survey(view) for view in views]
+    from .device import per_item  # here, not at the top: the CLI reads this module's defaults without loading torch
+
+    surveys = per_item(_survey, views)
     for view, survey in zip(views, surveys):
         if survey.mask.sum() < 16:
             raise InputError(f"view {view.name!r}: the finger mask has only {int(survey.mask.sum())} pixels")
     sizes = [(view.width, view.height) for view in views]
     period, periods = float("nan"), []  # not measured when nothing depends on it
     if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
-        periods = [_photo_period(view, survey) for view, survey in zip(views, surveys)]
+        periods = per_item(lambda pair: _photo_period(*pair), list(zip(views, surveys)))
         period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
     factor = _factor(period, ridge_px, sizes) if factor is None else factor
     scale = WorkingScale(float(factor), period, ridge_px, tuple(float(p) for p in periods),
                          all(survey.factor == 1.0 for survey in surveys))
-    photo, working = [], []
-    for view, survey in zip(views, surveys):
+
+    def both(pair: tuple[View, _Survey]) -> tuple[View, View]:
+        view, survey = pair
         size = scale.size((view.width, view.height))
         same = size == (survey.image.shape[1], survey.image.shape[0])  # the survey copy is the working one
         image = survey.image if same else resized_image(view.image, size)
@@ -192,6 +195,9 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
             mask = resized_mask(survey.mask, size)
         photo_mask = view.mask if view.mask is not None else resized_mask(
             mask if scale.factor >= survey.factor else survey.mask, (view.width, view.height))
-        photo.append(view.with_(mask=photo_mask))
-        working.append(photo[-1] if scale.factor == 1.0 else View(view.name, image, mask))
+        photo = view.with_(mask=photo_mask)
+        return photo, (photo if scale.factor == 1.0 else View(view.name, image, mask))
+
+    pairs = per_item(both, list(zip(views, surveys)))
+    photo, working = [p for p, _ in pairs], [w for _, w in pairs]
     return photo, working, scale

@@ -59,3 +59,35 @@ def test_single_threaded_holds_torch_opencv_and_blas_to_one_thread_and_restores_
         assert torch.get_num_threads() == 1 and cv2.getNumThreads() == 1
     after = ({p["prefix"]: p["num_threads"] for p in threadpool_info()}, torch.get_num_threads(), cv2.getNumThreads())
     assert after == before
+
+
+@pytest.mark.parametrize("threads", ["1", "2", "3"])
+def test_per_item_keeps_the_items_order_raises_the_first_error_and_restores_the_threads(monkeypatch, threads):
+    import threading
+
+    import cv2
+    import torch
+
+    from fingersplat3d.device import per_item
+
+    monkeypatch.setenv("FS3D_THREADS", threads)
+    torch_before, cv_before = torch.get_num_threads(), cv2.getNumThreads()
+    seen = set()
+
+    def square(item):
+        seen.add(threading.get_ident())
+        assert torch.get_num_threads() == 1 or threads == "1"  # the libraries on one thread under each item
+        return item * item
+
+    assert per_item(square, range(7)) == [item * item for item in range(7)]
+    assert per_item(square, []) == []
+    assert len(seen) <= int(threads)
+
+    def fails_on_odd(item):
+        if item % 2:
+            raise InputError(f"item {item}")
+        return item
+
+    with pytest.raises(InputError, match="item 1"):
+        per_item(fails_on_odd, range(6))
+    assert (torch.get_num_threads(), cv2.getNumThreads()) == (torch_before, cv_before)

@@ -40,6 +40,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..device import per_item
 from ..pointmaps.base import Pointmap
 from ..scene import View
 from ..segment.side_cut import capture_frames
@@ -212,7 +213,7 @@ class _Prepared:
         on it, an eighth of a ridge period a step: what the first guesses' votes compare."""
         charts = [CylinderChart.from_frame(frame) for frame in frames]
         step = max(1.0, self.period / 8.0)
-        return charts, [chart.unwrap(texture, mask, step) for chart, texture, mask in zip(charts, self.textures, self.masks)]
+        return charts, per_item(lambda v: charts[v].unwrap(self.textures[v], self.masks[v], step), range(len(charts)))
 
     @cached_property
     def maps(self) -> list[RidgeMaps]:
@@ -225,7 +226,7 @@ def _prepare(views: Sequence[View], period_px: float | None = None) -> _Prepared
     masks = [np.asarray(view.mask, bool) for view in views]
     period = float(period_px) if period_px else float(np.median([estimate_ridge_period(gray, mask)
                                                                  for gray, mask in zip(grays, masks)]))
-    textures = [ridge_texture(gray, mask, period) for gray, mask in zip(grays, masks)]
+    textures = per_item(lambda v: ridge_texture(grays[v], masks[v], period), range(len(views)))
     return _Prepared(textures, masks, grays, period)
 
 

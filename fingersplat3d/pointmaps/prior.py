@@ -113,12 +113,14 @@ class PriorBackend:
         """One own-frame pointmap per view, on the view's pixel grid; outlines the frame does not cut take the axis
         the views agree on (:func:`~fingersplat3d.segment.silhouette.capture_axes`), and chords the frame cuts along a
         view's side take their widths from the other views (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`)."""
+        from ..device import per_item  # here: importing the backend does not load torch
+
         masks = [self._mask(view) for view in views]
         hints = capture_axes(masks)
         axes = [finger_axis(mask, hint) for mask, hint in zip(masks, hints)]  # (axis, origin) per view, found once
         widths = side_cut_widths(masks, axes=[axis for axis, _ in axes])
-        return [self._predict(index, view, mask, axis, width)
-                for index, (view, mask, axis, width) in enumerate(zip(views, masks, axes, widths))]
+        return per_item(lambda index: self._predict(index, views[index], masks[index], axes[index], widths[index]),
+                        range(len(views)))
 
     @staticmethod
     def _mask(view: View) -> np.ndarray:
