@@ -121,15 +121,19 @@ def single_threaded() -> Iterator[None]:
 
 def per_item(function: Callable[[Item], Result], items: Sequence[Item]) -> list[Result]:
     """``[function(item) for item in items]``, the items on :func:`cpu_threads` threads at once with the libraries
-    under them on one thread each (:func:`single_threaded`): for a capture's few views, whose per-view work (masks,
-    ridge periods, pointmaps, clouds) is OpenCV, numpy and Open3D calls that release the GIL, each one too small for
-    those libraries' own threads to pay. The results are in the items' order and the same as one at a time; the
-    first item (in order) whose call raises raises here."""
+    under them on one thread each (:func:`single_threaded`): for work whose items are OpenCV, numpy and Open3D calls
+    that release the GIL, each one too small for those libraries' own threads to pay (a capture's few views: masks,
+    ridge periods, pointmaps, clouds; a pair's patch searches). The results are in the items' order and the same as
+    one at a time; the first item (in order) whose call raises raises here. A single item keeps the libraries' own
+    threads; a process given one core runs its items in turn, the libraries on one thread all the same."""
     from concurrent.futures import ThreadPoolExecutor
 
     items = list(items)
-    threads = min(cpu_threads(), len(items))
-    if threads <= 1:
+    cores = cpu_threads()
+    if cores > 1 and len(items) <= 1:
         return [function(item) for item in items]
-    with single_threaded(), ThreadPoolExecutor(threads) as pool:
-        return list(pool.map(function, items))
+    with single_threaded():
+        if cores == 1:
+            return [function(item) for item in items]
+        with ThreadPoolExecutor(min(cores, len(items))) as pool:
+            return list(pool.map(function, items))

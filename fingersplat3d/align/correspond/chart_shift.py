@@ -20,13 +20,12 @@ guided matching, which predicts them through the 3D model.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from ...device import cpu_threads, single_threaded
+from ...device import per_item
 from .chart import MAX_CHART_ANGLE, CylinderChart, Unwrapped
 
 __all__ = ["ChartShift", "estimate_chart_shift", "chart_shift_candidates", "ChartPredictor"]
@@ -94,8 +93,7 @@ def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.nd
         return (y - (py + half), x - (left + px + half), best) if best >= MIN_PATCH_NCC else None
 
     # Patches in parallel on the process's threads (OpenCV releases the GIL), OpenCV itself on one each.
-    with single_threaded(), ThreadPoolExecutor(cpu_threads()) as pool:
-        votes = [v for v in pool.map(vote, centres) if v is not None]
+    votes = [v for v in per_item(vote, centres) if v is not None]
     return np.asarray(votes, np.float64).reshape(-1, 3)
 
 

@@ -21,14 +21,13 @@ Pure numpy/OpenCV.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
 import cv2
 import numpy as np
 
-from ...device import cpu_threads, single_threaded
+from ...device import cpu_threads, per_item
 from .texture import structure_products
 
 __all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_jacobian", "match_guided", "structure_information"]
@@ -203,8 +202,7 @@ def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, per
     def chunk(points: np.ndarray) -> list:
         return [_match_one(texture_a, texture_b, grid[i], warps[i], half, search, exclusion) for i in points]
 
-    with single_threaded(), ThreadPoolExecutor(threads) as pool:
-        results = np.array([r for part in pool.map(chunk, chunks) for r in part], np.float64).reshape(-1, 4)
+    results = np.array([r for part in per_item(chunk, chunks) for r in part], np.float64).reshape(-1, 4)
     # Each peak carried from a's frame into b's by the point's own local map (its matmul, as one stacked product).
     uv_b = prediction[index] + (jacobian[index] @ results[:, :2, None])[:, :, 0]
     score, uniqueness = results[:, 2], results[:, 3]
