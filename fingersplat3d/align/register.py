@@ -22,7 +22,8 @@ The loop (all numbers scale with the measured ridge period):
    shrinks each round, so the matches come closer to the truth and cover more of the overlap. A pair must
    also **agree**: ``min_agreement`` of the points the model puts on both views must match. Views of two
    fingers pass a chart vote and an epipolar check by chance now and then, never this; a view that only
-   disagreeing pairs placed is placed no longer;
+   disagreeing pairs placed is placed no longer. After the first round, a view whose every pair agrees far below the
+   capture's best pair is placed again from its votes' peaks as in step 3 (``weak_agreement_share``);
 5. **pointmaps redrawn at the fitted focal** (with a ``redraw`` callable, three views or more): the prior drew each
    view's relief through a guessed pinhole, and where the fitted focal is far from that guess the depth fields had
    to bend the surface to the fitted perspective against their smoothness, which held the focal up (real rig: fitted
@@ -63,7 +64,7 @@ from .solve.sensitivity import focal_probe
 from .transfer import MIN_PARALLAX_DEG
 from .width_check import least_turns_deg
 
-__all__ = ["RegistrationConfig", "Registration", "register_views", "distinct_viewpoints", "MATCHERS"]
+__all__ = ["RegistrationConfig", "Registration", "register_views", "distinct_viewpoints", "weak_view", "MATCHERS"]
 
 MATCHERS = ("surface", "minutiae", "sift", "rootsift", "akaze")
 
@@ -160,6 +161,16 @@ class RegistrationConfig:
     front-side pairs)."""
     undecided_margin: float = 1.5
     """How many times better than any peak turning the view elsewhere the placing peak must agree."""
+    weak_agreement_share: float = 0.35
+    """After the first guided round, a view whose every pair agrees at less than this share of the capture's best pair
+    is placed again as a view no decisive vote placed (``undecided_peaks``): its first guess may have been a decisive
+    vote's wrong peak, grown into a few matches that still pass ``min_agreement``. The new place is kept when its
+    agreement is ``undecided_margin`` times the old one (else the view stays where it was). 0 turns this off.
+    Measured: synthetic fingers of sections unlike the prior's (``fs3d synth --shapes wide``, seed 6), a side view at
+    0.19 beside a pair at 0.99, 20.7 degrees off and reported registered, re-placed by its vote's third peak at 0.999
+    (0.45 degrees). Real dev captures, first round: every view's best pair at 0.53-0.79, at least 0.78 of the capture's
+    best (cropped to no fingertip: 0.43-0.82, at least 0.61; made dark, ``tools/degrade_photos.py --kind dark``: at least
+    0.53), so none is placed again."""
     undecided_zooms: tuple[float, ...] = (1.25, 0.8, 1.5, 2.0 / 3.0)
     """Besides its peaks, such a view is tried with its texture unwrapped at these scales against the placed view's
     (a photo taken nearer or farther than the others: from a quarter larger or smaller the vote's patches no longer
@@ -423,9 +434,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     fitted = registered
     rounds = 0
     cap = config.many_views_matches if n_views >= config.many_views else 0  # each pair's matches in the alignment
-    for _ in range(config.guided_rounds if registered else 0):
+    rechecked = not (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
+                     and config.weak_agreement_share > 0)
+    while rounds < (config.guided_rounds if registered else 0):
         rounds += 1
-        refined, disagreed = [], set()
+        refined, disagreed, agreements = [], set(), {}
         for a, b in pairs:
             if not (alignment.aligned[a] and alignment.aligned[b]):
                 continue
@@ -434,6 +447,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             record = records[(a, b)]
             record["matches"].append(len(verified))
             record.setdefault("agreement", []).append(round(agreement, 3) if matches.tried else None)
+            agreements[(a, b)] = agreement if matches.tried else 0.0
             if matches.tried and agreement < config.min_agreement:
                 disagreed.add((a, b))
                 record.update(ok=False, reason=f"the views agree at {agreement:.0%} of the {matches.tried} points the model "
@@ -445,6 +459,17 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             else:
                 refined.append(_pair_correspondences(a, b, verified, np.eye(4), cap))
                 record.update(ok=True, reason="")
+        if not rechecked:
+            rechecked = True
+            replaced = _weak_views_replaced(alignment, agreements, registered, pairs, records, prepared, charts,
+                                            unwrapped, pointmaps, align, config, rng, say)
+            if replaced is not None:  # the round again, from the new place
+                for pair in agreements:
+                    records[pair]["matches"].pop()
+                    records[pair]["agreement"].pop()
+                alignment, registered = replaced
+                fitted, rounds = registered, rounds - 1
+                continue
         # A view placed only by pairs this round found disagreeing is placed no longer; a pair that merely found too
         # few matches through the model still holds its views by its earlier ones.
         fitted = [p for p in fitted if (p.a, p.b) not in disagreed]
@@ -556,6 +581,58 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     records[best[1]]["placed_at_zoom"] = round(best[4], 3)
                 placing = True
     return alignment
+
+
+def weak_view(agreements: dict[tuple[int, int], float], share: float, root: int) -> tuple[int | None, float]:
+    """``(view, its best agreement)`` for the one view (never ``root``) whose every pair in ``agreements`` (a guided
+    round's, per pair of views) agreed at less than ``share`` of the best pair's; ``(None, nan)`` when there is no
+    such view, or more than one (then no pair of the others places it again)."""
+    best = max(agreements.values(), default=0.0)
+    own: dict[int, float] = {}
+    for (a, b), agreement in agreements.items():
+        for view in (a, b):
+            own[view] = max(own.get(view, 0.0), agreement)
+    weak = [view for view, agreement in own.items() if agreement < share * best and view != root]
+    return (weak[0], own[weak[0]]) if len(weak) == 1 else (None, float("nan"))
+
+
+def _weak_views_replaced(alignment: GlobalAlignment, agreements: dict, registered: list[PairCorrespondences], pairs,
+                         records: dict, prepared: _Prepared, charts, unwrapped, pointmaps, align,
+                         config: RegistrationConfig, rng, say):
+    """``(alignment, registered)`` with the one view whose every pair agreed far below the capture's best pair
+    (``RegistrationConfig.weak_agreement_share``) placed again by its votes' peaks, or None when no view was that weak,
+    or its new place agrees no better by ``undecided_margin`` (the records then as they were)."""
+    import copy
+
+    if not all(alignment.aligned):  # the others all placed: they place it again
+        return None
+    view, own = weak_view(agreements, config.weak_agreement_share, alignment.root)
+    if view is None:
+        return None
+    kept = [p for p in registered if view not in (p.a, p.b)]
+    before = alignment.aligned
+    base = _still_reached(alignment, kept)
+    if base.aligned[view] or sum(base.aligned) != sum(before) - 1:
+        return None
+    saved = {pair: copy.deepcopy(records[pair]) for pair in pairs if view in pair}
+    for pair in saved:  # as a view no vote placed: what placed it before says nothing of the new place
+        records[pair].update(ok=False)
+        records[pair].pop("placed_by_agreement", None)
+        records[pair].pop("placed_at_zoom", None)
+    first = next(iter(saved))
+    say(f"view {records[first]['a' if first[0] == view else 'b']} agrees weakly: placed again")
+    grown = list(kept)
+    placed = _placed_by_agreement(base, grown, pairs, records, prepared, charts, unwrapped, pointmaps, align, config,
+                                  rng, say)
+    new = max((records[pair].get("placed_by_agreement", 0.0) for pair in saved), default=0.0)
+    if placed.aligned[view] and new >= config.undecided_margin * own:
+        for pair in saved:
+            records[pair]["replaced_from_agreement"] = round(own, 3)
+        return placed, grown
+    for pair, record in saved.items():
+        records[pair].clear()
+        records[pair].update(record)
+    return None
 
 
 def _candidate_shifts(a: int, b: int, prepared: _Prepared, charts, unwrapped, config: RegistrationConfig,
