@@ -429,7 +429,9 @@ def _alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment:
                           f"focal {1 / probe['shorter_share']:.1f} times shorter fits about as well (the loss "
                           f"{100 * probe['shorter_loss_rise']:+.0f} %), with the turn between {moved[0]} {moved[1]:.1f}° "
                           "away; seen on crops without the fingertip whose outer views share no skin (real ones: turns up "
-                          "to 19° off): the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
+                          "to 19° off)" + (f"; the focal is taken at the short end of what fits, {probe['taken_share']:.2f} of "
+                                           "where the fit slid" if probe.get("taken_share") else "")
+                          + ": the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
         elif loose:
             _warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
                   + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "

@@ -294,3 +294,28 @@ def test_the_focal_probe_says_when_the_photos_do_not_hold_the_focal(capture, mon
     monkeypatch.setattr(sensitivity, "FLAT_LOSS_RISE", -np.inf)  # the longer probe alone, as before
     longer = focal_probe(two_alignment, depths[:2], focal, pairs[:1], config)
     assert longer.held and two.moves[0, 1] > 2 * longer.moves[0, 1]  # measured 11.1 against 4.1
+
+
+def test_the_short_end_of_a_flat_focal_valley_is_where_the_loss_meets_the_tolerance(monkeypatch):
+    """short_end walks the focal down while the loss stays within the tolerance and stops where it meets it
+    (interpolated between steps); None when the first step already leaves it, the last step within it when the
+    interpolated one cannot be compared, and the whole walk when the valley never rises."""
+    from types import SimpleNamespace
+
+    from fingersplat3d.align.solve import sensitivity
+    from fingersplat3d.align.solve.sensitivity import SHORT_END_STEP, short_end
+
+    def valley(rise_of_share):
+        monkeypatch.setattr(sensitivity, "_held_at", lambda alignment, *args: SimpleNamespace(share=args[-1]))
+        monkeypatch.setattr(sensitivity, "_loss_rise", lambda held, alignment: rise_of_share(held.share))
+
+    valley(lambda share: 2.0 * np.log(share) ** 2)  # +10 % at share exp(-sqrt(0.05)) = 0.80
+    held, share = short_end(None, [], 1.0, [], GlobalAlignConfig(), 0.10)
+    assert held.share == share and abs(share - np.exp(-np.sqrt(0.05))) < 0.02
+    valley(lambda share: 5.0 * (1.0 - share))  # +50 % at the first step
+    assert short_end(None, [], 1.0, [], GlobalAlignConfig(), 0.10) is None
+    valley(lambda share: 0.0)  # flat all the way: the walk's last step
+    assert short_end(None, [], 1.0, [], GlobalAlignConfig(), 0.10)[1] == pytest.approx(SHORT_END_STEP ** 12)
+    valley(lambda share: 2.0 * np.log(share) ** 2 if share in (SHORT_END_STEP, SHORT_END_STEP ** 2, SHORT_END_STEP ** 3)
+           else float("nan"))
+    assert short_end(None, [], 1.0, [], GlobalAlignConfig(), 0.10)[1] == pytest.approx(SHORT_END_STEP ** 2)

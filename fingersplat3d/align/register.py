@@ -60,7 +60,7 @@ from .solve.global_opt import (PIVOT_MIN_VIEWS, GlobalAlignConfig, GlobalAlignme
                                spanning_tree, turn_uncertainty_of)
 from .solve.photometric import PhotometricConfig, refine_alignment
 from .solve.rig import Rig, rig_align
-from .solve.sensitivity import focal_probe
+from .solve.sensitivity import focal_probe, short_end
 from .transfer import MIN_PARALLAX_DEG
 from .width_check import least_turns_deg
 
@@ -176,6 +176,13 @@ class RegistrationConfig:
     (a photo taken nearer or farther than the others: from a quarter larger or smaller the vote's patches no longer
     correlate), each scale's decisive vote tried alike (``pairs[].placed_at_zoom`` in the report). () turns this
     off. Measured on synthetic uwa captures with one photo enlarged or shrunk (docs/measurements.md)."""
+    short_end_tolerance: float = 0.10
+    """Where the focal probe finds that the photos do not hold the focal (the loss flat toward a longer one), the
+    alignment is re-fitted with the focal held at the shortest one whose loss is within this share of the fit's
+    (:func:`~fingersplat3d.align.solve.sensitivity.short_end`; ``alignment.focal_probe.taken_share`` in the report):
+    the fit's slide toward a nearly orthographic camera is the valley's drift, and the true focal was on the short side
+    of it every time it was measured. Three views or more (``PIVOT_MIN_VIEWS``; two views cannot fix the focal at
+    all). 0 keeps the fitted focal."""
     redraw_tolerance: float = 0.05
     """With a ``redraw`` callable, the pointmaps are drawn again when the fitted focal is further than this share
     from the one they were drawn with (closer, the perspective barely changes the relief)."""
@@ -502,7 +509,17 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             say("how sure: probing the focal")
             probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
             if probe is not None:
-                alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=probe.summary())
+                summary = probe.summary()
+                if not probe.held and config.short_end_tolerance > 0 and sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
+                    say("the focal not held: its short end")
+                    shorter = short_end(alignment, depths, focals, solved_with[0], config.global_align,
+                                        config.short_end_tolerance, solved_with[1])
+                    if shorter is not None:
+                        summary["taken_share"] = round(shorter[1], 3)
+                        alignment = replace(shorter[0], turn_uncertainty_deg=turn_uncertainty_of(
+                            shorter[0], depths, focals, solved_with[0], replace(config.global_align, optimize_focal=False),
+                            solved_with[1]))
+                alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=summary)
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
                         photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours)
 
