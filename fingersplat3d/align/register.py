@@ -441,8 +441,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     fitted = registered
     rounds = 0
     cap = config.many_views_matches if n_views >= config.many_views else 0  # each pair's matches in the alignment
-    rechecked = not (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
-                     and config.weak_agreement_share > 0)
+    check_weak = (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
+                  and config.weak_agreement_share > 0)  # once, after the first round
     while rounds < (config.guided_rounds if registered else 0):
         rounds += 1
         refined, disagreed, agreements = [], set(), {}
@@ -466,8 +466,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             else:
                 refined.append(_pair_correspondences(a, b, verified, np.eye(4), cap))
                 record.update(ok=True, reason="")
-        if not rechecked:
-            rechecked = True
+        if check_weak:
+            check_weak = False
             replaced = _weak_views_replaced(alignment, agreements, registered, pairs, records, prepared, charts,
                                             unwrapped, pointmaps, align, config, rng, say)
             if replaced is not None:  # the round again, from the new place
@@ -503,8 +503,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         alignment, photometric = refine_alignment(alignment, depths, focals, fitted, config.global_align, prepared.textures,
                                                   prepared.masks, prepared.period, config.photometric, min_turns)
     if rig is None and config.global_align.solver == "lm":
-        alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
-                                                                                config.global_align, solved_with[1]))
+        solved_config = config.global_align  # what the reported alignment was solved with
         if sum(alignment.aligned) >= 2:
             say("how sure: probing the focal")
             probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
@@ -516,10 +515,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                         config.short_end_tolerance, solved_with[1])
                     if shorter is not None:
                         summary["taken_share"] = round(shorter[1], 3)
-                        alignment = replace(shorter[0], turn_uncertainty_deg=turn_uncertainty_of(
-                            shorter[0], depths, focals, solved_with[0], replace(config.global_align, optimize_focal=False),
-                            solved_with[1]))
+                        alignment, solved_config = shorter[0], replace(config.global_align, optimize_focal=False)
                 alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=summary)
+        # The curvature once, of the alignment reported (the probes neither read nor change it).
+        alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
+                                                                                solved_config, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
                         photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours)
 
@@ -627,9 +627,8 @@ def _weak_views_replaced(alignment: GlobalAlignment, agreements: dict, registere
     if view is None:
         return None
     kept = [p for p in registered if view not in (p.a, p.b)]
-    before = alignment.aligned
     base = _still_reached(alignment, kept)
-    if base.aligned[view] or sum(base.aligned) != sum(before) - 1:
+    if base.aligned[view] or sum(base.aligned) != len(base.aligned) - 1:  # the others still reached without it
         return None
     saved = {pair: copy.deepcopy(records[pair]) for pair in pairs if view in pair}
     for pair in saved:  # as a view no vote placed: what placed it before says nothing of the new place
