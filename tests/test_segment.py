@@ -287,3 +287,22 @@ def test_light_spilt_on_the_background_in_stripes_is_not_taken(real_dev):
     image = (cv2.imread(str(real_dev / "2_2_10_1_3.jpg"), cv2.IMREAD_GRAYSCALE) / 255.0).astype(np.float32)
     assert _solidity(finger_mask(image).astype(np.uint8)) > 0.97
 
+
+
+def test_a_hazy_dark_background_is_found_by_brightness():
+    """A dark-background photo whose contrast is lowered about its mean (haze, glare, a faint capture) and blurred
+    past its ridges: the border ring reads above the dark share of the bright end, the ridges find no finger, and the
+    brightness still does. (Measured on a real frame so degraded, 2_2_7_1 f2: border 0.352 of the bright end, IoU
+    0.992 against the clean frame's mask; before, "no finger found".)"""
+    from fingersplat3d.segment.masks import DARK_BORDER_SHARE, HAZY_BORDER_SHARE, _brightness, _dark_border
+
+    view = synthetic_views("uwa", 0)[1]
+    image = cv2.GaussianBlur(view.image.astype(np.float32), (0, 0), 3.0)
+    skin = float(np.median(image[view.mask]))
+    hazy = (0.45 * skin + 0.55 * image).astype(np.float32)  # the background lifted to ~45 % of the skin
+    brightness = _brightness(hazy, "v")
+    assert not _dark_border(brightness, DARK_BORDER_SHARE) and _dark_border(brightness, HAZY_BORDER_SHARE)
+    assert mask_iou(finger_mask(hazy, name="v"), view.mask) >= 0.95
+    # Haze over no finger at all is still no finger.
+    blank = np.full_like(hazy, 0.45 * skin) + np.random.default_rng(0).normal(0, 0.003, hazy.shape).astype(np.float32)
+    raises_naming("v", finger_mask, blank, name="v")

@@ -63,6 +63,7 @@ LOW_MASK_EROSION_PX = 2  # more than the outward bias of the noise-floor edge (~
 ROUGH_LEVEL = 0.25  # share of the skin contrast above which the first, rough mask lies (above dim glows)
 NOTCH_RADIUS_SCALE = 4  # notches (valleys, a crease) narrower than this many closing radii are filled
 DARK_BORDER_SHARE = 0.35  # a border ring darker than this share of the bright end is a dark background
+HAZY_BORDER_SHARE = 0.6  # ... and up to this share, a hazy one: tried by brightness where the ridges found no finger
 EDGE_BAND = (1.5, 4.0)  # band inside the rough mask (px from its edge) where the edge skin level is read
 EDGE_ROUNDS = 8  # at most this many more reads of the edge level, inside the mask the last one gave
 EDGE_GROWTH = 0.01  # a read is kept when its mask is larger than the last one's by more than this share
@@ -76,12 +77,27 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` in [0, 1]): on a dark
     background by brightness (below); on any other (the frame's border ring brighter than
     :data:`DARK_BORDER_SHARE` of the image's bright end) by its ridges and GrabCut
-    (:mod:`~fingersplat3d.segment.any_background`)."""
+    (:mod:`~fingersplat3d.segment.any_background`). A border ring up to :data:`HAZY_BORDER_SHARE` of the bright end
+    (a dark background under haze or glare, a photo's contrast lowered) is also tried by brightness where the ridges
+    found no finger (blurred or faint)."""
     brightness = _brightness(image, name)
     if not _dark_border(brightness):
         from .any_background import finger_mask_any_background
 
-        return one_finger(finger_mask_any_background(np.asarray(image, np.float32), name=name))
+        try:
+            return one_finger(finger_mask_any_background(np.asarray(image, np.float32), name=name))
+        except InputError as no_ridges:
+            if not _dark_border(brightness, HAZY_BORDER_SHARE):
+                raise
+            try:
+                return _bright_mask(brightness, name)
+            except InputError:
+                raise no_ridges from None
+    return _bright_mask(brightness, name)
+
+
+def _bright_mask(brightness: np.ndarray, name: str) -> np.ndarray:
+    """The finger's silhouette by brightness, against a background darker than the skin (:func:`finger_mask`)."""
     height, width = brightness.shape
     smooth = cv2.GaussianBlur(brightness, (0, 0), SMOOTH_SIGMA_PX, borderType=cv2.BORDER_REPLICATE)
     floor, threshold = _thresholds(smooth, name)
@@ -110,17 +126,16 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     return mask
 
 
-def _dark_border(brightness: np.ndarray) -> bool:
-    """Whether the frame's border ring (2 % of the long side) is dark: its median at most
-    :data:`DARK_BORDER_SHARE` of the image's 90th percentile brightness. A finger enters the frame at one side at
-    most two, so the ring is mostly background."""
+def _dark_border(brightness: np.ndarray, share: float = DARK_BORDER_SHARE) -> bool:
+    """Whether the frame's border ring (2 % of the long side) is dark: its median at most ``share`` of the image's
+    90th percentile brightness. A finger enters the frame at one side at most two, so the ring is mostly background."""
     height, width = brightness.shape
     ring = max(1, int(0.02 * max(height, width)))
     border = np.concatenate([brightness[:ring].ravel(), brightness[-ring:].ravel(),
                              brightness[:, :ring].ravel(), brightness[:, -ring:].ravel()])
     step = max(1, int(np.sqrt(brightness.size / 65536)))
     bright = float(np.percentile(brightness[::step, ::step], 90))
-    return bool(np.median(border) <= DARK_BORDER_SHARE * bright)
+    return bool(np.median(border) <= share * bright)
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
