@@ -144,6 +144,13 @@ def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
     impostor = [int(r["score"]) for r in gallery_rows if r["genuine"] == "0"]
     assert min(genuine) > max(impostor)  # the photos' prints match their own fingers' rolled prints
     assert "photos vs gallery" in (out / "summary.md").read_text()
+    # Against the flat-laid gallery the photos are unrolled first; compared with each other they are not.
+    assert {p.name for p in (out / "prints").iterdir()} >= {"7_1_1_1_0.png", "7_1_1_1_0@unrolled.png"}
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--flat", "-o", str(tmp_path / "flat")]) == 0
+    assert not any("@unrolled" in p.name for p in (tmp_path / "flat" / "prints").iterdir())
+    flat = [(int(r["score"]), r["genuine"]) for r in csv.DictReader((tmp_path / "flat" / "scores.csv").open())
+            if r["protocol"] == "photos vs gallery"]
+    assert min(s for s, g in flat if g == "1") > max(s for s, g in flat if g == "0")
     assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--mirror", "-o", str(out), "--overwrite"]) == 0
     mirrored = [r for r in csv.DictReader((out / "scores.csv").open()) if r["protocol"] == "photos vs gallery"]
     assert max(int(r["score"]) for r in mirrored if r["genuine"] == "1") < min(genuine)  # handedness matters

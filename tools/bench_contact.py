@@ -1,12 +1,13 @@
 """Contactless against contact on synthetic fingers: photos and rolled-equivalent prints against true rolled prints.
 
-    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR]
+    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR] [--flat]
 
 Per seed: an ``fs3d synth`` finger on the uwa rig (1280x1024), its three photos renamed in the UWA naming
 (finger ``<seed>_1``, frame 0 the front camera), a geometry-only fuse of the photos alone (no cameras, no
 scale: prints are scaled by the ridge period, as a phone user's would be), and its true rolled print in a
 gallery named by finger. Then ``fs3d eval match`` with ``--gallery`` and ``--rolled``: the front photos'
-contact-like prints and the models' rolled prints against every finger's true rolled print (genuine: the
+contact-like prints (unrolled through the surface their silhouettes give; ``--flat``: scaled and turned alone)
+and the models' rolled prints against every finger's true rolled print (genuine: the
 same finger). Prints the summary table.
 """
 from __future__ import annotations
@@ -36,6 +37,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
+    parser.add_argument("--flat", action="store_true", help="the photos' prints scaled and turned, not unrolled")
     args = parser.parse_args()
     info = machine()
     with tempfile.TemporaryDirectory() as scratch:
@@ -59,7 +61,8 @@ def main() -> int:
             reconstructions.append(rec)
         samples, _ = parse_samples(sorted(probes.glob("*.png")), views={"0"})
         out = Path(scratch) / "match"
-        summary = run_match_evaluation(samples, out, rolled=reconstructions, gallery=read_gallery([gallery]))
+        summary = run_match_evaluation(samples, out, rolled=reconstructions, gallery=read_gallery([gallery]),
+                                       flat=args.flat)
         scores = list(csv.DictReader((out / "scores.csv").open()))
         spread = []
         for protocol in ("photos vs gallery", "rolled prints vs gallery"):
@@ -68,7 +71,8 @@ def main() -> int:
             if genuine and impostor:
                 spread.append(f"| {protocol} | {np.median(genuine):.0f} ({min(genuine)}) | {np.median(impostor):.0f} "
                               f"({max(impostor)}) |")
-    print(f"Machine: {info['cpu']}, {info['cores']} cores; {len(args.seeds)} synthetic fingers, uwa rig 1280x1024.\n")
+    print(f"Machine: {info['cpu']}, {info['cores']} cores; {len(args.seeds)} synthetic fingers, uwa rig 1280x1024; "
+          f"photos' prints {'flat' if args.flat else 'unrolled'}.\n")
     print(summary_markdown(summary))
     print("| protocol | genuine median (lowest) | impostor median (highest) |\n|---|---|---|")
     print("\n".join(spread))

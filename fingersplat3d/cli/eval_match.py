@@ -56,6 +56,9 @@ def add(actions) -> None:
                             f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
     match.add_argument("--enhance", choices=ENHANCERS, default="gabor",
                        help="ridge enhancement of the rolled prints (as fs3d print --enhance)")
+    match.add_argument("--flat", action="store_true",
+                       help="photos compared with flat-laid prints (--gallery, --rolled) scaled and turned alone, not "
+                            "unrolled first (as fs3d print --flat; photos compared with photos or renders always are)")
     match.add_argument("--ridges", choices=("bright", "dark"), default="bright",
                        help="how ridge crests look in the photos (default bright: contactless rigs' plain light)")
     match.add_argument("-o", "--output", type=Path, required=True, help="folder for the results")
@@ -83,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
                                        naming=args.naming, ridges=args.ridges, rolled=args.rolled,
-                                       gallery=gallery, mirror=args.mirror, enhancer=args.enhance)
+                                       gallery=gallery, mirror=args.mirror, enhancer=args.enhance,
+                                       flat=args.flat)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

@@ -21,7 +21,8 @@ def add(commands) -> None:
         NAME, help=HELP,
         description="For each reconstruction folder (fs3d fuse -o), the rolled-equivalent print of its model: the finger's "
                     "surface unrolled by arc length, textured from the photos that see it most squarely, ridges dark, "
-                    "tip up, ~500 ppi; for each image file, a contact-like print of the photo. Writes OUT/<name>.png, "
+                    "tip up, ~500 ppi; for each image file, its finger unrolled the same way through the surface "
+                    "its silhouette gives (--flat: the photo scaled and turned). Writes OUT/<name>.png, "
                     "OUT/masks/, OUT/points/ (per print pixel its 3D point on the model), OUT/pictures/ (each print beside "
                     "its source) and OUT/prints.csv. Exit status 4 when some inputs gave no print, or a print too small for "
                     "NFIQ2 (listed in prints.csv).")
@@ -36,8 +37,11 @@ def add(commands) -> None:
     prints.add_argument("--mirror", action="store_true",
                         help="mirror the prints left-right, as an inked or scanned contact print is of a photo of the pad "
                              "(default: a photo's handedness, as fs3d synth's true rolled prints)")
+    prints.add_argument("--flat", action="store_true",
+                        help="a photo's print is the photo scaled to 500 ppi and turned tip up, not unrolled (its skin "
+                             "foreshortened toward the finger's sides, as the photo shows it)")
     prints.add_argument("--enhance", choices=ENHANCERS, default="gabor",
-                        help="ridge enhancement of a model's print: gabor (the default, built in), or pyfing's learned "
+                        help="ridge enhancement of a model's or photo's unrolled print: gabor (the default, built in), or pyfing's learned "
                              "snfen or classical gbfen (pip install 'fingersplat3d[learned]'; measured in docs/prints.md)")
     prints.add_argument("--no-nfiq2", action="store_true", help="skip NFIQ2 and the minutiae count")
     prints.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -67,14 +71,15 @@ def run(args: argparse.Namespace) -> int:
         pairs = list(zip(args.inputs, _names(args.inputs)))
         for source, name in tqdm(pairs, desc="fs3d print", unit="print", disable=None):
             rows.append(make_print(source, name, folder, px_per_mm=args.px_per_mm, ppi=args.ppi, ridges=args.ridges,
-                                   nfiq2=not args.no_nfiq2, mirror=args.mirror, enhancer=args.enhance))
+                                   nfiq2=not args.no_nfiq2, mirror=args.mirror, enhancer=args.enhance,
+                                   flat=args.flat))
         write_rows(folder / "prints.csv", COLUMNS, rows)
     failed = [row for row in rows if row["status"] == "failed"]
     small = [row for row in rows if row["status"] == "too small"]
     for row in rows:
         if row["status"] != "failed":
             centre = "the pad's mirror line" if row.get("centred_on") == "mirror line" else "the cameras' direction"
-            extra = f", {row['coverage_deg']:.0f} degrees of roll centred on {centre}" if row["kind"] == "rolled" else ""
+            extra = f", {row['coverage_deg']:.0f} degrees of roll centred on {centre}" if row["kind"] in ("rolled", "photo") else ""
             score = f", NFIQ2 {row['nfiq2']}" if row.get("nfiq2") not in (None, "") else ""
             print(f"{row['name']}: {row['kind']} print {row['width_px']}x{row['height_px']} px{extra}{score}")
     print(f"wrote {args.output}")

@@ -23,8 +23,10 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
   ``mirror``: the probes are mirrored left-right first (an inked or scanned contact print is the
   mirror image of a photo of the pad; a rolled print of ``fs3d synth`` or IMPOSE is not).
 
-Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`) and goes
-through NIST's tools (:mod:`fingersplat3d.eval.fingerprint`). Error rates:
+Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`); compared with flat-laid prints
+(the gallery's, the rolled prints), a photo's finger is unrolled first through the surface its silhouette gives
+(:func:`fingersplat3d.prints.make.unrolled_photo`; ``flat``: not). All go through NIST's tools
+(:mod:`fingersplat3d.eval.fingerprint`). Error rates:
 :func:`fingersplat3d.eval.verification.error_rates`. Writes ``scores.csv``, ``prints.csv`` (per
 print: minutiae, NFIQ2, failure), ``prints/`` (the prints as PNG), ``summary.md`` and ``det.png``.
 """
@@ -123,13 +125,32 @@ class _Print:
     image: np.ndarray | None = field(default=None, repr=False, compare=False)  # the print (uint8), when one was made
 
 
-def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str) -> _Print:
-    from ..eval.fingerprint import fingerprint_of
+def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str,
+              unrolled: bool = False) -> _Print:
+    """A photo's or render's print, scaled and turned (:func:`~fingersplat3d.eval.fingerprint.fingerprint_of`) or
+    ``unrolled`` (:func:`~fingersplat3d.prints.make.unrolled_photo`), written to ``folder``, with its minutiae."""
+    from ..eval.fingerprint import analyse, fingerprint_of
 
-    contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name)
-    if contact is not None:
-        cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), contact.image)
-    return _Print(name, fingerprint, failure, None if contact is None else contact.image)
+    if not unrolled:
+        contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name)
+        printed = None if contact is None else contact.image
+    else:
+        from ..align.correspond.texture import as_gray
+        from ..eval.contact import ContactImage
+        from ..prints.make import unrolled_photo
+        from ..segment.masks import finger_mask
+
+        try:
+            gray = as_gray(image, name=name)
+            printed = unrolled_photo(gray, finger_mask(gray, name=name) if mask is None else mask, ridges=ridges,
+                                     name=name)[0].image
+        except FS3DError as error:
+            return _Print(name, None, str(error))
+        fingerprint = analyse(ContactImage.of_print(printed))
+        failure = fingerprint.failure
+    if printed is not None:
+        cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), printed)
+    return _Print(name, fingerprint, failure, printed)
 
 
 def _reconstruction_identity(folder: Path, pattern: re.Pattern):
@@ -242,9 +263,12 @@ def _mirrored(probe: _Print):
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
                          progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
-                         mirror: bool = False, enhancer: str = "gabor") -> dict:
+                         mirror: bool = False, enhancer: str = "gabor", flat: bool = False) -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary (``enhancer``: of the
-    rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`)."""
+    rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`). Photos compared with photos or renders (one
+    camera's foreshortening on both sides) are scaled and turned; compared with flat-laid prints (the gallery's contact
+    prints, the rolled prints), they are unrolled first (:func:`~fingersplat3d.prints.make.unrolled_photo`), unless
+    ``flat``."""
     from tqdm import tqdm
 
     from ..eval.fingerprint import match_score
@@ -261,6 +285,12 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
             real.append(_Print(sample.name, None, str(error)))
             continue
         real.append(_print_of(sample.name, image, None, prints, ridges))
+    laid = real  # the photos' prints for comparisons with flat-laid prints
+    if (gallery or rolled) and not flat:
+        laid = [_print_of(f"{sample.name}@unrolled", read_image(sample.path), None, prints, ridges, unrolled=True)
+                if print_.fingerprint is not None else print_
+                for sample, print_ in tqdm(list(zip(samples, real)), desc="prints (photos unrolled)", unit="image",
+                                           disable=not progress)]
     synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
                    for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
     unrolled = [_rolled(folder, pattern, prints, ridges, enhancer)
@@ -289,13 +319,13 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                              "genuine": int(finger_a == finger_b), "angle_deg": "",
                              "score": match_score(print_a.fingerprint, print_b.fingerprint)})
         for k, sample in enumerate(samples):
-            if sample.capture != capture_a and sample.view == unrolled[i][2] and real[k].fingerprint is not None:
+            if sample.capture != capture_a and sample.view == unrolled[i][2] and laid[k].fingerprint is not None:
                 rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
                              "genuine": int(sample.finger == finger_a), "angle_deg": "",
-                             "score": match_score(print_a.fingerprint, real[k].fingerprint)})
+                             "score": match_score(print_a.fingerprint, laid[k].fingerprint)})
     contact = [_gallery_print(finger, path) for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print",
                                                                       disable=not progress)]
-    probes = ([("real", sample.finger, p) for sample, p in zip(samples, real)]
+    probes = ([("real", sample.finger, p) for sample, p in zip(samples, laid)]
               + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
               + [("rolled", finger, p) for finger, _, _, p in unrolled])
     for kind, finger, probe in probes if contact else ():
@@ -307,7 +337,8 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                 rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name, "gallery": entry.name,
                              "genuine": int(gallery_finger == finger), "angle_deg": "",
                              "score": match_score(template, entry.fingerprint)})
-    all_prints = (real + [p for *_, renders in synthesized for _, p in renders] + [p for *_, p in unrolled]
+    all_prints = (real + ([] if laid is real else laid) + [p for *_, renders in synthesized for _, p in renders]
+                  + [p for *_, p in unrolled]
                   + [p for _, p in contact])
     write_rows(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",

@@ -7,8 +7,9 @@
   period (9 px at 500 ppi, as for the photos' prints): first the photos' median period, then the
   print's own (measured on the flattened skin, it is not shortened toward the photos' rims, so it is
   the same whatever the finger's roll; the print is redone when the two differ by more than 3 %).
-* An image file: its contact-like print (:func:`fingersplat3d.eval.contact.contact_like`), on any
-  background the finger mask handles.
+* An image file: its finger unrolled through the ``prior``'s surface, as a model's is through its own
+  (:func:`unrolled_photo`), on any background the finger mask handles; with ``flat``, the photo scaled and turned
+  alone (:func:`fingersplat3d.eval.contact.contact_like`).
 
 Writes ``OUT/<name>.png`` (8-bit gray, ridges dark, white outside the skin), ``OUT/masks/<name>.png``,
 ``OUT/points/<name>.npy`` (rolled prints: ``[H, W, 3]`` float32 model points per print pixel, NaN
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,7 +31,11 @@ from ..errors import FS3DError, InputError
 from ..eval.contact import MIN_SIDE, TARGET_PERIOD_PX, ContactImage
 from .rolled import RolledEquivalent
 
-__all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "print_photo", "ROLLED_PPI"]
+if TYPE_CHECKING:
+    from ..scene import Camera
+
+__all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "print_photo", "unrolled_photo",
+           "unrolled_print", "ROLLED_PPI"]
 
 ROLLED_PPI = 500.0
 PERIOD_SLACK = 0.03  # a print scaled by the ridge period is redone when its own period is off by more than this
@@ -42,59 +48,78 @@ POINTS_PER_VIEW = 80_000  # model points per view the chart is made from (the de
 def print_reconstruction(folder: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
                          ridges: str = "bright", enhancer: str = "gabor") -> tuple[RolledEquivalent, str, np.ndarray]:
     """``(print, where its scale came from, the photo it owes most to)`` of a reconstruction folder."""
-    from ..align.correspond.texture import as_gray, estimate_ridge_period, ridge_area, ridge_texture
+    from ..align.correspond.texture import as_gray
     from ..io.reconstruction_folder import ReconstructionFolder
-    from ..segment.silhouette import orient_frames
-    from .skin_chart import finger_frame, skin_chart
-    from .rolled import PrintView, default_px_per_unit, rolled_print
 
     rec = ReconstructionFolder(folder)
     names = [name for name in rec.names if rec.has_depth(name)]
     if not names:
         raise InputError(f"{folder}: the reconstruction has no depth maps (depth/<view>.npy): nothing to unroll")
-    views, periods, points, photos = [], [], [], []
+    views, photos = [], []
     for name in names:
         depth = rec.depth(name)
-        mask = np.isfinite(depth)
-        if mask.sum() < 64:
+        if np.isfinite(depth).sum() < 64:
             continue
         gray = as_gray(rec.photo(name), name=f"view {name!r}'s photo")
         if gray.shape != depth.shape:
             raise InputError(f"view {name!r}: its photo is {gray.shape[1]}x{gray.shape[0]}, its depth map "
                              f"{depth.shape[1]}x{depth.shape[0]}")
-        area = ridge_area(mask) & mask
-        period = estimate_ridge_period(gray, area)
-        camera = rec.cameras.cameras[name]
-        views.append(PrintView(name, camera, depth, ridge_texture(gray, area, period), area))
-        periods.append(period)
+        views.append((name, rec.cameras.cameras[name], depth, gray))
         photos.append(gray)
-        cloud = camera.depth_to_points(depth)[mask]
-        points.append(cloud[:: max(1, len(cloud) // POINTS_PER_VIEW)])
     if not views:
         raise InputError(f"{folder}: no view's depth map covers a finger")
-    frames = orient_frames([view.area if view.area.sum() >= 64 else np.isfinite(view.depth) for view in views])
-    axes = [(frame.origin, frame.axis) for frame in frames]
-    cloud = np.concatenate(points)
-    chart = skin_chart(cloud, finger_frame(cloud, [view.camera for view in views], axes))
     if rec.cameras.units == "mm" or rec.cameras.scale_mm_per_unit is not None:
         mm_per_unit = 1.0 if rec.cameras.units == "mm" else float(rec.cameras.scale_mm_per_unit)
         scale, scale_from = ppi / 25.4 * mm_per_unit, "cameras (mm)"
     elif px_per_mm is not None:
-        per_view = [float(view.camera.K[0, 0]) / (float(np.nanmedian(view.depth)) * px_per_mm) for view in views]
+        per_view = [float(camera.K[0, 0]) / (float(np.nanmedian(depth)) * px_per_mm) for _, camera, depth, _ in views]
         scale, scale_from = ppi / 25.4 * float(np.median(per_view)), "--px-per-mm"
     else:
-        scale, scale_from = default_px_per_unit(views, periods) * ppi / ROLLED_PPI, "ridge period"
-    result = rolled_print(chart, views, scale, ridges=ridges, enhancer=enhancer)
-    if scale_from == "ridge period" and abs(result.period_px / (TARGET_PERIOD_PX * ppi / ROLLED_PPI) - 1) > PERIOD_SLACK:
-        # The photos foreshorten the ridges toward their rims; the print does not: its own period sets the scale.
-        result = rolled_print(chart, views, scale * TARGET_PERIOD_PX * ppi / ROLLED_PPI / result.period_px, ridges=ridges,
-                              enhancer=enhancer)
-    source = photos[int(np.argmax([result.view_share[view.name] for view in views]))]
+        scale, scale_from = None, "ridge period"
+    result = unrolled_print(views, scale, ppi=ppi, ridges=ridges, enhancer=enhancer)
+    source = photos[int(np.argmax([result.view_share[name] for name, *_ in views]))]
     return result, scale_from, source
 
 
-def print_photo(path: Path, *, ridges: str = "bright") -> tuple[ContactImage, np.ndarray]:
-    """The contact-like print of one photo, and the photo (gray)."""
+def unrolled_print(views, px_per_unit: float | None = None, *, ppi: float = ROLLED_PPI, ridges: str = "bright",
+                   enhancer: str = "gabor") -> RolledEquivalent:
+    """The rolled-equivalent print of ``views``, each ``(name, camera, depth, gray photo)`` with its depth map NaN
+    off the finger: the skin chart of their points unrolled at ``px_per_unit`` print pixels per model unit, or (None)
+    scaled by the ridge period: first the photos' median period, then the print's own (measured on the flattened skin,
+    it is not shortened toward the photos' rims, so it is the same whatever the finger's roll; the print is redone
+    when the two differ by more than :data:`PERIOD_SLACK`)."""
+    from ..align.correspond.texture import estimate_ridge_period, ridge_area, ridge_texture
+    from ..segment.silhouette import orient_frames
+    from .rolled import PrintView, default_px_per_unit, rolled_print
+    from .skin_chart import finger_frame, skin_chart
+
+    prints, periods, points = [], [], []
+    for name, camera, depth, gray in views:
+        mask = np.isfinite(depth)
+        area = ridge_area(mask) & mask
+        period = estimate_ridge_period(gray, area)
+        prints.append(PrintView(name, camera, depth, ridge_texture(gray, area, period), area))
+        periods.append(period)
+        cloud = camera.depth_to_points(depth)[mask]
+        points.append(cloud[:: max(1, len(cloud) // POINTS_PER_VIEW)])
+    frames = orient_frames([view.area if view.area.sum() >= 64 else np.isfinite(view.depth) for view in prints])
+    cloud = np.concatenate(points)
+    chart = skin_chart(cloud, finger_frame(cloud, [view.camera for view in prints],
+                                           [(frame.origin, frame.axis) for frame in frames]))
+    by_period = px_per_unit is None
+    scale = default_px_per_unit(prints, periods) * ppi / ROLLED_PPI if by_period else px_per_unit
+    result = rolled_print(chart, prints, scale, ridges=ridges, enhancer=enhancer)
+    if by_period and abs(result.period_px / (TARGET_PERIOD_PX * ppi / ROLLED_PPI) - 1) > PERIOD_SLACK:
+        # The photos foreshorten the ridges toward their rims; the print does not: its own period sets the scale.
+        result = rolled_print(chart, prints, scale * TARGET_PERIOD_PX * ppi / ROLLED_PPI / result.period_px,
+                              ridges=ridges, enhancer=enhancer)
+    return result
+
+
+def print_photo(path: Path, *, ridges: str = "bright", flat: bool = False,
+                enhancer: str = "gabor") -> tuple[ContactImage | RolledEquivalent, np.ndarray]:
+    """The print of one photo (:func:`unrolled_photo`; ``flat``: the photo scaled and turned,
+    :func:`~fingersplat3d.eval.contact.contact_like`), and the photo (gray)."""
     from ..align.correspond.texture import as_gray
     from ..eval.contact import contact_like
     from ..io.images import read_image
@@ -102,7 +127,33 @@ def print_photo(path: Path, *, ridges: str = "bright") -> tuple[ContactImage, np
 
     image = read_image(path)
     gray = as_gray(image, name=str(path))
-    return contact_like(gray, finger_mask(gray, name=path.name), ridges=ridges), gray
+    mask = finger_mask(gray, name=path.name)
+    if flat:
+        return contact_like(gray, mask, ridges=ridges), gray
+    return unrolled_photo(gray, mask, ridges=ridges, enhancer=enhancer, name=path.name)[0], gray
+
+
+def unrolled_photo(gray: np.ndarray, mask: np.ndarray, *, ridges: str = "bright", enhancer: str = "gabor",
+                   name: str = "photo") -> tuple[RolledEquivalent, "Camera"]:
+    """One photo's rolled-equivalent print: its finger unrolled through the ``prior`` pointmap's surface (the section
+    swept along the silhouette, :mod:`~fingersplat3d.pointmaps.prior`) as :func:`unrolled_print` unrolls a model. A
+    photo foreshortens the skin toward the finger's sides; a contact print lays it flat, so the photo's print, scaled
+    and turned alone, has its minutiae nearer each other the further they lie from the pad's middle. Also the camera
+    the print's points are in (the photo's, at the prior's focal): ``camera.project`` of a print pixel's point is the
+    photo pixel it shows."""
+    from ..pointmaps.prior import PriorBackend
+    from ..scene import Camera, View
+
+    gray = np.asarray(gray, np.float32)
+    mask = np.asarray(mask, bool)
+    if mask.shape != gray.shape:
+        raise InputError(f"{name}: the mask {mask.shape} does not match the image {gray.shape}")
+    if mask.sum() < 64:
+        raise InputError(f"{name}: the finger mask is empty: there is no finger to make a print of")
+    pointmap = PriorBackend().predict_views([View(name, gray, mask)])[0]
+    depth = np.where(mask & pointmap.valid, pointmap.points[..., 2], np.nan).astype(np.float32)
+    camera = Camera.from_focal(pointmap.focal, gray.shape[1], gray.shape[0])
+    return unrolled_print([(name, camera, depth, gray)], ridges=ridges, enhancer=enhancer), camera
 
 
 def nfiq2_region(image: np.ndarray, centre_x: float | None = None) -> np.ndarray:
@@ -135,7 +186,8 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
     region = nfiq2_region(image, centre_x)
     contact = ContactImage.of_print(region)
     found = analyse(contact)
-    note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if region.shape != image.shape else "")
+    cut = np.count_nonzero(region < 255) < np.count_nonzero(image < 255)  # skin left out, not only white margins
+    note = found.failure or (f"scored on the middle {region.shape[1]}x{region.shape[0]} px" if cut else "")
     scores = {"nfiq2": "" if found.nfiq2 is None else round(found.nfiq2, 1), "minutiae": found.count, "nfiq2_note": note}
     if not contact.fits_nfiq2:  # the region is cut to NFIQ2's largest size, so this is a print too small (or blank)
         width, height = contact.ridge_area_size
@@ -146,11 +198,13 @@ def _scores(image: np.ndarray, nfiq2: bool, centre_x: float | None = None) -> di
 
 
 def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = None, ppi: float = ROLLED_PPI,
-               ridges: str = "bright", nfiq2: bool = True, mirror: bool = False, enhancer: str = "gabor") -> dict:
+               ridges: str = "bright", nfiq2: bool = True, mirror: bool = False, enhancer: str = "gabor",
+               flat: bool = False) -> dict:
     """One input's print written into ``out``; its ``prints.csv`` row (``status`` done, failed or too small, with the
     reason).
     ``mirror``: left-right, as an inked or scanned contact print is of a photo of the pad. ``enhancer``: of a model's
-    print (:func:`~fingersplat3d.prints.rolled.rolled_print`)."""
+    or a photo's unrolled print (:func:`~fingersplat3d.prints.rolled.rolled_print`). ``flat``: a photo's print scaled
+    and turned, not unrolled (:func:`print_photo`)."""
     from ..io.images import write_image
     from ..viz import gray8, side_by_side
 
@@ -168,10 +222,15 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
             (out / "points").mkdir(exist_ok=True)
             np.save(out / "points" / f"{name}.npy", np.ascontiguousarray(points))
         elif source.is_file():
-            contact, photo = print_photo(source, ridges=ridges)
-            image, mask, centre_x = contact.image, contact.image < 255, None
+            made, photo = print_photo(source, ridges=ridges, flat=flat, enhancer=enhancer)
             per_mm = ROLLED_PPI / 25.4
-            row.update(kind="photo", ppi=ROLLED_PPI, scale_from="ridge period", coverage_deg="", centred_on="")
+            row.update(kind="photo flat" if flat else "photo", ppi=ROLLED_PPI, scale_from="ridge period")
+            if flat:
+                image, mask, centre_x = made.image, made.image < 255, None
+                row.update(coverage_deg="", centred_on="")
+            else:
+                image, mask, centre_x = made.image, made.mask, made.origin_px[0]
+                row.update(coverage_deg=round(made.coverage_deg, 1), centred_on=made.centred_on)
         else:
             raise InputError(f"{source}: no such file or folder")
     except (FS3DError, OSError, ValueError) as error:
