@@ -396,7 +396,7 @@ def _photo_placed(folder: Path, flat: bool):
     finger's true rolled print, after one similarity (``placed_minutiae`` on the print's map back to the photo)."""
     from fingersplat3d.eval.contact import contact_like
     from fingersplat3d.io.capture import read_capture
-    from fingersplat3d.prints.make import unrolled_photo
+    from fingersplat3d.prints.make import photo_pixels, unrolled_photo
 
     view = next(v for v in read_capture(folder).views if v.name == "center")
     truth = json.loads((folder / "minutiae.json").read_text())
@@ -413,11 +413,8 @@ def _photo_placed(folder: Path, flat: bool):
         made, camera = unrolled_photo(view.image, view.mask)
         mask = made.mask
         assert np.all(made.image[~mask] == 255) and made.coverage_deg > 90
-        points = made.points.reshape(-1, 3)
-        photo = np.full((len(points), 2), np.nan)
-        seen = np.isfinite(points).all(1)
-        photo[seen] = camera.project(points[seen])[0]
-        photo = photo.reshape(mask.shape + (2,))
+        photo = photo_pixels(made, camera)
+        assert np.isfinite(photo[mask]).all() and np.isnan(photo[~mask]).all()
     on_photo = np.where(mask[..., None], np.concatenate([photo, np.zeros(mask.shape + (1,))], -1), np.nan)
     return placed_minutiae(on_photo, mask, uv, xy, max_gap=1.5)
 

@@ -31,7 +31,7 @@ def _prints(gray: np.ndarray, mask: np.ndarray) -> dict:
     """``{kind: (print image, skin mask, seconds, [H, W, 3] photo pixel (u, v, 0) of each print pixel, NaN off the
     skin)}`` for both kinds."""
     from fingersplat3d.eval.contact import contact_like
-    from fingersplat3d.prints.make import unrolled_photo
+    from fingersplat3d.prints.make import photo_pixels, unrolled_photo
 
     made = {}
     started = time.perf_counter()
@@ -43,12 +43,7 @@ def _prints(gray: np.ndarray, mask: np.ndarray) -> dict:
     started = time.perf_counter()
     unrolled, camera = unrolled_photo(gray, mask)
     seconds = time.perf_counter() - started
-    points = unrolled.points.reshape(-1, 3)
-    photo = np.full((len(points), 2), np.nan)
-    seen = np.isfinite(points).all(1)
-    photo[seen] = camera.project(points[seen])[0]
-    made["unrolled"] = (unrolled.image, unrolled.mask, seconds, _on_photo(photo.reshape(unrolled.mask.shape + (2,)),
-                                                                          unrolled.mask))
+    made["unrolled"] = (unrolled.image, unrolled.mask, seconds, _on_photo(photo_pixels(unrolled, camera), unrolled.mask))
     return made
 
 

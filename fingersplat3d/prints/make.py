@@ -34,8 +34,8 @@ from .rolled import RolledEquivalent
 if TYPE_CHECKING:
     from ..scene import Camera
 
-__all__ = ["COLUMNS", "make_print", "nfiq2_region", "print_reconstruction", "print_photo", "unrolled_photo",
-           "unrolled_print", "ROLLED_PPI"]
+__all__ = ["COLUMNS", "make_print", "nfiq2_region", "photo_pixels", "print_reconstruction", "print_photo",
+           "unrolled_photo", "unrolled_print", "ROLLED_PPI"]
 
 ROLLED_PPI = 500.0
 PERIOD_SLACK = 0.03  # a print scaled by the ridge period is redone when its own period is off by more than this
@@ -154,6 +154,17 @@ def unrolled_photo(gray: np.ndarray, mask: np.ndarray, *, ridges: str = "bright"
     depth = np.where(mask & pointmap.valid, pointmap.points[..., 2], np.nan).astype(np.float32)
     camera = Camera.from_focal(pointmap.focal, gray.shape[1], gray.shape[0])
     return unrolled_print([(name, camera, depth, gray)], ridges=ridges, enhancer=enhancer), camera
+
+
+def photo_pixels(result: RolledEquivalent, camera: "Camera") -> np.ndarray:
+    """``[H, W, 2]``: the photo pixel ``(u, v)`` each pixel of a photo's unrolled print shows (:func:`unrolled_photo`'s
+    print and camera), NaN off its skin: minutiae found on the print carried to the photo, or the photo's to the print."""
+    points = result.points.reshape(-1, 3)
+    pixels = np.full((len(points), 2), np.nan)
+    seen = np.isfinite(points).all(1)
+    if seen.any():
+        pixels[seen] = camera.project(points[seen])[0]
+    return pixels.reshape(result.points.shape[:2] + (2,))
 
 
 def nfiq2_region(image: np.ndarray, centre_x: float | None = None) -> np.ndarray:
