@@ -132,7 +132,8 @@ def main() -> int:
         print(f"\n{kind}: placed median {np.median([r[kind]['placed'] for r in rows]):.0%}, located median "
               f"{np.median([r[kind]['located'] for r in rows]):.0%}, genuine median "
               f"{np.median([r['genuine'][k] for r in rows]):.0f} (lowest {min(r['genuine'][k] for r in rows)}), "
-              f"impostors median {np.median(impostors):.0f} (highest {max(impostors, default=0)}) of {len(impostors)}")
+              + (f"impostors median {np.median(impostors):.0f} (highest {max(impostors)}) of {len(impostors)}" if impostors
+                 else "no impostors (one finger)"))
     if args.impose is not None:
         truth = found_in((255 * read_image(args.impose / "sample2_rolled.png")).round().astype(np.uint8))
         print("\n| IMPOSE render (roll °) | bozorth3 genuine: flat / unrolled | impostors (synthetic true prints), highest: "
