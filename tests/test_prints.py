@@ -449,4 +449,13 @@ def test_fs3d_print_of_a_photo_unrolled_or_flat(tmp_path):
         assert row["status"] == "done" and row["kind"] == kind
         assert (row["coverage_deg"] != "") == (kind == "photo")
         widths[kind] = int(row["width_px"])
+        # Each inked print pixel's photo pixel lies on the photo's finger: minutiae can be carried back.
+        printed = cv2.imread(str(out / "center.png"), cv2.IMREAD_GRAYSCALE)
+        xy = np.load(out / "photo_xy" / "center.npy")
+        assert xy.shape == printed.shape + (2,) and xy.dtype == np.float32
+        inked = printed < 255
+        assert np.isfinite(xy[inked]).all() and np.isnan(xy[~cv2.imread(str(out / "masks" / "center.png"), 0).astype(bool)]).all()
+        finger = cv2.imread(str(SAMPLE / "masks" / "center.png"), cv2.IMREAD_GRAYSCALE) > 127
+        u, v = np.rint(xy[inked]).astype(int).T
+        assert np.mean(finger[v.clip(0, finger.shape[0] - 1), u.clip(0, finger.shape[1] - 1)]) > 0.95
     assert widths["photo"] > 1.1 * widths["photo flat"]  # the sides laid flat, not foreshortened

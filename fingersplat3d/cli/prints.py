@@ -23,7 +23,8 @@ def add(commands) -> None:
                     "surface unrolled by arc length, textured from the photos that see it most squarely, ridges dark, "
                     "tip up, ~500 ppi; for each image file, its finger unrolled the same way through the surface "
                     "its silhouette gives (--flat: the photo scaled and turned). Writes OUT/<name>.png, "
-                    "OUT/masks/, OUT/points/ (per print pixel its 3D point on the model), OUT/pictures/ (each print beside "
+                    "OUT/masks/, OUT/points/ (per print pixel its 3D point on the model), OUT/photo_xy/ (per print pixel of a "
+                    "photo's print the photo pixel it shows), OUT/pictures/ (each print beside "
                     "its source) and OUT/prints.csv. Exit status 4 when some inputs gave no print, or a print too small for "
                     "NFIQ2 (listed in prints.csv).")
     prints.add_argument("inputs", nargs="+", type=Path, help="reconstruction folders and/or image files")

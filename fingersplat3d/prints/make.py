@@ -14,7 +14,8 @@
 Writes ``OUT/<name>.png`` (8-bit gray, ridges dark, white outside the skin), ``OUT/masks/<name>.png``,
 ``OUT/points/<name>.npy`` (rolled prints: ``[H, W, 3]`` float32 model points per print pixel, NaN
 outside: minutiae found on the print carried to the model, and through ``cameras.json`` to every
-photo), ``OUT/pictures/<name>.png`` (the print beside its source) and ``OUT/prints.csv``. An input that
+photo), ``OUT/photo_xy/<name>.npy`` (photos' prints: ``[H, W, 2]`` float32, the photo pixel each print pixel
+shows, NaN outside), ``OUT/pictures/<name>.png`` (the print beside its source) and ``OUT/prints.csv``. An input that
 gives no print is a ``failed`` row with its reason; the others are still made. A print whose skin is smaller than
 NFIQ2 scores (197 px a side: 10 mm at 500 ppi, a finger too small in its photos for a usable print) is written but
 is a ``too small`` row, with the reason, when NFIQ2 was asked for.
@@ -117,9 +118,10 @@ def unrolled_print(views, px_per_unit: float | None = None, *, ppi: float = ROLL
 
 
 def print_photo(path: Path, *, ridges: str = "bright", flat: bool = False,
-                enhancer: str = "gabor") -> tuple[ContactImage | RolledEquivalent, np.ndarray]:
+                enhancer: str = "gabor") -> tuple[ContactImage | RolledEquivalent, np.ndarray, np.ndarray]:
     """The print of one photo (:func:`unrolled_photo`; ``flat``: the photo scaled and turned,
-    :func:`~fingersplat3d.eval.contact.contact_like`), and the photo (gray)."""
+    :func:`~fingersplat3d.eval.contact.contact_like`), the photo (gray), and the photo pixel ``(u, v)`` each print pixel
+    shows (``[H, W, 2]`` float32, NaN off the print's skin)."""
     from ..align.correspond.texture import as_gray
     from ..eval.contact import contact_like
     from ..io.images import read_image
@@ -129,8 +131,12 @@ def print_photo(path: Path, *, ridges: str = "bright", flat: bool = False,
     gray = as_gray(image, name=str(path))
     mask = finger_mask(gray, name=path.name)
     if flat:
-        return contact_like(gray, mask, ridges=ridges), gray
-    return unrolled_photo(gray, mask, ridges=ridges, enhancer=enhancer, name=path.name)[0], gray
+        made = contact_like(gray, mask, ridges=ridges)
+        rows, cols = np.mgrid[0:made.image.shape[0], 0:made.image.shape[1]]
+        pixels = made.to_photo(np.stack([cols.ravel(), rows.ravel()], 1)).reshape(rows.shape + (2,))
+        return made, gray, np.where((made.image < 255)[..., None], pixels, np.nan).astype(np.float32)
+    made, camera = unrolled_photo(gray, mask, ridges=ridges, enhancer=enhancer, name=path.name)
+    return made, gray, photo_pixels(made, camera).astype(np.float32)
 
 
 def unrolled_photo(gray: np.ndarray, mask: np.ndarray, *, ridges: str = "bright", enhancer: str = "gabor",
@@ -233,7 +239,7 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
             (out / "points").mkdir(exist_ok=True)
             np.save(out / "points" / f"{name}.npy", np.ascontiguousarray(points))
         elif source.is_file():
-            made, photo = print_photo(source, ridges=ridges, flat=flat, enhancer=enhancer)
+            made, photo, photo_xy = print_photo(source, ridges=ridges, flat=flat, enhancer=enhancer)
             per_mm = ROLLED_PPI / 25.4
             row.update(kind="photo flat" if flat else "photo", ppi=ROLLED_PPI, scale_from="ridge period")
             if flat:
@@ -242,6 +248,8 @@ def make_print(source: Path, name: str, out: Path, *, px_per_mm: float | None = 
             else:
                 image, mask, centre_x = made.image, made.mask, made.origin_px[0]
                 row.update(coverage_deg=round(made.coverage_deg, 1), centred_on=made.centred_on)
+            (out / "photo_xy").mkdir(exist_ok=True)
+            np.save(out / "photo_xy" / f"{name}.npy", np.ascontiguousarray(photo_xy[:, ::-1] if mirror else photo_xy))
         else:
             raise InputError(f"{source}: no such file or folder")
     except (FS3DError, OSError, ValueError) as error:
