@@ -407,8 +407,7 @@ def _photo_placed(folder: Path, flat: bool):
     if flat:
         made = contact_like(view.image, view.mask)
         mask = made.image < 255
-        rows, cols = np.mgrid[0:mask.shape[0], 0:mask.shape[1]]
-        photo = made.to_photo(np.stack([cols.ravel(), rows.ravel()], 1)).reshape(mask.shape + (2,))
+        photo = made.photo_pixels()
     else:
         made, camera = unrolled_photo(view.image, view.mask)
         mask = made.mask

@@ -37,9 +37,7 @@ def _prints(gray: np.ndarray, mask: np.ndarray) -> dict:
     started = time.perf_counter()
     flat = contact_like(gray, mask)
     seconds = time.perf_counter() - started
-    rows, cols = np.mgrid[0:flat.image.shape[0], 0:flat.image.shape[1]]
-    photo = flat.to_photo(np.stack([cols.ravel(), rows.ravel()], 1)).reshape(rows.shape + (2,))
-    made["flat"] = (flat.image, flat.image < 255, seconds, _on_photo(photo, flat.image < 255))
+    made["flat"] = (flat.image, flat.image < 255, seconds, _on_photo(flat.photo_pixels(), flat.image < 255))
     started = time.perf_counter()
     unrolled, camera = unrolled_photo(gray, mask)
     seconds = time.perf_counter() - started

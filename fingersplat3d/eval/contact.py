@@ -63,6 +63,12 @@ class ContactImage:
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         return (xy - self.affine[:, 2]) @ np.linalg.inv(self.affine[:, :2]).T
 
+    def photo_pixels(self) -> np.ndarray:
+        """``[h, w, 2]``: the photo pixel ``(x, y)`` each print pixel shows, NaN off the inked skin."""
+        rows, cols = np.mgrid[0:self.image.shape[0], 0:self.image.shape[1]]
+        pixels = self.to_photo(np.stack([cols.ravel(), rows.ravel()], 1)).reshape(rows.shape + (2,))
+        return np.where((self.image < 255)[..., None], pixels, np.nan)
+
     @property
     def ridge_area_size(self) -> tuple[int, int]:
         """``(width, height)`` px of the inked part's bounding box; ``(0, 0)`` for a blank print."""

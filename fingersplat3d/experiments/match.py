@@ -277,20 +277,18 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     pattern = compile_naming(naming)
     prints = out / "prints"
     prints.mkdir(parents=True, exist_ok=True)
-    real = []
+    unroll = bool(gallery or rolled) and not flat
+    real, laid = [], []  # each photo's print; and its print for comparisons with flat-laid prints
     for sample in tqdm(samples, desc="prints (photos)", unit="image", disable=not progress):
         try:
             image = read_image(sample.path)
         except FS3DError as error:
             real.append(_Print(sample.name, None, str(error)))
+            laid.append(real[-1])
             continue
         real.append(_print_of(sample.name, image, None, prints, ridges))
-    laid = real  # the photos' prints for comparisons with flat-laid prints
-    if (gallery or rolled) and not flat:
-        laid = [_print_of(f"{sample.name}@unrolled", read_image(sample.path), None, prints, ridges, unrolled=True)
-                if print_.fingerprint is not None else print_
-                for sample, print_ in tqdm(list(zip(samples, real)), desc="prints (photos unrolled)", unit="image",
-                                           disable=not progress)]
+        laid.append(_print_of(f"{sample.name}@unrolled", image, None, prints, ridges, unrolled=True)
+                    if unroll and real[-1].fingerprint is not None else real[-1])
     synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
                    for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
     unrolled = [_rolled(folder, pattern, prints, ridges, enhancer)
@@ -337,7 +335,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                 rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name, "gallery": entry.name,
                              "genuine": int(gallery_finger == finger), "angle_deg": "",
                              "score": match_score(template, entry.fingerprint)})
-    all_prints = (real + ([] if laid is real else laid) + [p for *_, renders in synthesized for _, p in renders]
+    all_prints = (real + [p for p, q in zip(laid, real) if p is not q] + [p for *_, renders in synthesized for _, p in renders]
                   + [p for *_, p in unrolled]
                   + [p for _, p in contact])
     write_rows(out / "prints.csv", ("name", "minutiae", "nfiq2", "failure"),

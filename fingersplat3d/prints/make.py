@@ -132,9 +132,7 @@ def print_photo(path: Path, *, ridges: str = "bright", flat: bool = False,
     mask = finger_mask(gray, name=path.name)
     if flat:
         made = contact_like(gray, mask, ridges=ridges)
-        rows, cols = np.mgrid[0:made.image.shape[0], 0:made.image.shape[1]]
-        pixels = made.to_photo(np.stack([cols.ravel(), rows.ravel()], 1)).reshape(rows.shape + (2,))
-        return made, gray, np.where((made.image < 255)[..., None], pixels, np.nan).astype(np.float32)
+        return made, gray, made.photo_pixels().astype(np.float32)
     made, camera = unrolled_photo(gray, mask, ridges=ridges, enhancer=enhancer, name=path.name)
     return made, gray, photo_pixels(made, camera).astype(np.float32)
 
@@ -164,7 +162,8 @@ def unrolled_photo(gray: np.ndarray, mask: np.ndarray, *, ridges: str = "bright"
 
 def photo_pixels(result: RolledEquivalent, camera: "Camera") -> np.ndarray:
     """``[H, W, 2]``: the photo pixel ``(u, v)`` each pixel of a photo's unrolled print shows (:func:`unrolled_photo`'s
-    print and camera), NaN off its skin: minutiae found on the print carried to the photo, or the photo's to the print."""
+    print and camera), NaN off its skin: minutiae found on the print carried to the photo, or the photo's to the print
+    (a flat print's: :meth:`~fingersplat3d.eval.contact.ContactImage.photo_pixels`)."""
     points = result.points.reshape(-1, 3)
     pixels = np.full((len(points), 2), np.nan)
     seen = np.isfinite(points).all(1)
