@@ -31,7 +31,7 @@ from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
 from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, working_views
 
-__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX",
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "unseen_skin_of", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX",
            "refuse_focal_with_rig"]
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
@@ -510,6 +510,16 @@ def _fused_cloud(clouds: list, cameras: list[Camera], aligned: list[int], voxel:
     return cloud
 
 
+def unseen_skin_of(cloud, views: Sequence[View], cameras: Sequence[Camera], fitted: Sequence[int], config):
+    """The skin next to ``cloud`` that none of ``views[fitted]`` sees, for the splat stage to complete the model with
+    (:class:`fingersplat3d.unseen_skin.UnseenSkin`); None when ``config.unseen_skin`` is off or there is none."""
+    if not config.unseen_skin:
+        return None
+    from .unseen_skin import unseen_skin_of_cloud
+
+    return unseen_skin_of_cloud(cloud, [cameras[v] for v in fitted], [views[v].mask for v in fitted])
+
+
 def cloud_of_views(result: Reconstruction, views: Sequence[int], min_confidence: float = 0.05, voxel: float = 0.002):
     """The fused cloud of ``views`` alone, from the reconstruction's depths and cameras (what a fit
     that leaves the other views out starts from)."""
@@ -617,7 +627,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
                     ensure_compiled(lambda text: bar.set_postfix_str(f"splat: {text}"))
                     bar.set_postfix_str("splat")
-                splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean,
+                unseen = unseen_skin_of(cloud, capture.views, cameras, aligned, config.splat)
+                splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean, unseen=unseen,
                                         depths=depths, device=device, progress=progress,
                                         periods=scale.working_view_periods_px())
             cameras = splat.cameras

@@ -28,6 +28,9 @@ def test_presets_trade_time_for_detail():
         preset("fast", iteration=3)
     with pytest.raises(ValueError):
         SplatConfig(iterations=-1)
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="lambda_solid"):
+            SplatConfig(lambda_solid=bad)
 
 
 def _striped_view(period: float, size=(160, 128), box=(20, 140, 30, 100)) -> View:
@@ -295,3 +298,41 @@ def test_pose_refinement_holds_still_with_near_orthographic_cameras():
             shifts.append(float(np.linalg.norm(after.project(centre)[0] - before.project(centre)[0])))
         drift[far] = max(shifts)  # pixels the scene's centre moved in the refined views
     assert drift[50.0] < 1.0 and drift[50.0] < 3.0 * drift[1.0] + 0.2
+
+
+def test_frozen_gaussians_stay_put_while_the_others_fit():
+    truth = _plane_scene()
+    cameras = _cameras()
+    views = _views(truth, cameras)
+    generator = torch.Generator().manual_seed(3)
+    start = truth.with_(sh_dc=truth.sh_dc + 0.8 * torch.randn(truth.sh_dc.shape, generator=generator))
+    frozen = torch.arange(len(start)) % 2 == 0
+    config = SplatConfig(iterations=30, refine_poses=False, densify_from=1000, lr_colors=0.1, min_gaussians=1)
+    fit = fit_gaussians(start, views, cameras, config, device="cpu", frozen=frozen)
+    for before, after in zip(start.tensors(), fit.gaussians.tensors()):
+        assert torch.equal(before[frozen], after[frozen])
+    assert not torch.equal(start.sh_dc[~frozen], fit.gaussians.sh_dc[~frozen])
+    assert np.mean(fit.losses[-5:]) < np.mean(fit.losses[:3])
+    with pytest.raises(ValueError, match="frozen"):  # rows that densification would renumber
+        fit_gaussians(start, views, cameras, replace(config, densify_from=10), device="cpu", frozen=frozen)
+    with pytest.raises(ValueError, match="frozen"):
+        fit_gaussians(start, views, cameras, config, device="cpu", frozen=frozen[:-1])
+
+
+def test_solid_term_makes_the_skin_opaque_where_the_photo_alone_would_not():
+    truth = _plane_scene()
+    cameras = _cameras()
+    views = _views(truth, cameras)
+    start = truth.with_(opacity_logits=torch.full_like(truth.opacity_logits, -1.0))  # a see-through start
+    config = SplatConfig(iterations=40, refine_poses=False, densify_from=1000, lr_colors=0.05, min_gaussians=1,
+                         lambda_solid=0.0)
+
+    def alpha_on_finger(model):
+        with torch.no_grad():
+            return float(np.mean([render_camera(model, c, near=0.1).alpha.numpy()[v.mask].mean()
+                                  for c, v in zip(cameras, views)]))
+
+    free = fit_gaussians(start, views, cameras, config, device="cpu").gaussians
+    solid = fit_gaussians(start, views, cameras, replace(config, lambda_solid=5.0), device="cpu").gaussians
+    assert alpha_on_finger(solid) > alpha_on_finger(free) + 0.02
+    assert alpha_on_finger(solid) > alpha_on_finger(start)

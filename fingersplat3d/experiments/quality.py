@@ -51,7 +51,7 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
     """The rows of one capture (see the module docstring)."""
     from ..device import resolve_device
     from ..eval.image import image_scores
-    from ..pipeline import cloud_of_views, fuse
+    from ..pipeline import cloud_of_views, fuse, unseen_skin_of
     from ..splat.fit import fit_camera
     from ..splat.novel import render_views
     from ..splat.stage import run_splat_stage
@@ -72,7 +72,8 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
             continue
         try:
             cloud = cloud_of_views(result, train, config.min_confidence, config.voxel)
-            stage = run_splat_stage(views, result.cameras, train, cloud, config.splat, config.clean,
+            unseen = unseen_skin_of(cloud, views, result.cameras, train, config.splat)
+            stage = run_splat_stage(views, result.cameras, train, cloud, config.splat, config.clean, unseen=unseen,
                                     depths=result.depths, device=device, progress=progress)
         except FS3DError as error:
             rows.append(dict(row, status="failed", reason=str(error)))

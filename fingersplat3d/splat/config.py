@@ -25,6 +25,11 @@ class SplatConfig:
     lambda_silhouette: float = 0.1
     """Weight of the mean rendered opacity outside the finger mask (keeps Gaussians off the background,
     so the mask cleaning has little to remove; 0 = photometric loss only)."""
+    lambda_solid: float = 0.3
+    """Weight of the mean rendered transparency (1 - opacity) on the finger: a solid finger shows nothing of what lies
+    behind its skin. Fitted against a dark background, 3DGS skin stays 5-25 % see-through, and the unseen skin's
+    Gaussians (:attr:`unseen_skin`) showed through it. Measured (docs/measurements.md): 0.3 keeps them hidden on real
+    captures (training views within 0.5 dB of without them) and costs synthetic views 0.2-0.3 dB; 1.0 cost 0.6 dB."""
     lambda_depth: float = 10.0
     """Weight of the rendered depth's relative L1 distance to the geometry stage's depth, inside the
     mask (0 = free: the photos alone decide where the surface goes; measured worse, README)."""
@@ -105,6 +110,11 @@ class SplatConfig:
     """Darken each Gaussian's colour by the cosine at which a camera sees it, to the power of the capture's
     exponent estimated from the registered geometry before the fit (:mod:`~fingersplat3d.splat.shading`);
     False: one colour per Gaussian whatever the view, the plain SH degree 0 model."""
+    # --- the start -------------------------------------------------------------------------------
+    unseen_skin: bool = True
+    """Start Gaussians on the skin next to the fitted views' surface that none of them sees, too
+    (:mod:`fingersplat3d.unseen_skin`: each ring's section carried round, in the ring's tone): a left-out view or a
+    new view past the cameras shows that skin, which a fit of the seen surface alone leaves as a hole."""
     # --- rendering -----------------------------------------------------------------------------
     near_fraction: float = 0.01
     """Near plane as a fraction of the camera-to-finger distance."""
@@ -124,6 +134,8 @@ class SplatConfig:
             raise ValueError("SplatConfig.iterations must be >= 0")
         if not 0.0 <= self.lambda_dssim <= 1.0:
             raise ValueError("SplatConfig.lambda_dssim must be in [0, 1]")
+        if not self.lambda_solid >= 0.0:
+            raise ValueError("SplatConfig.lambda_solid must be >= 0")
         if not 0.0 <= self.polish_fraction <= 1.0:
             raise ValueError("SplatConfig.polish_fraction must be in [0, 1]")
         if not 0.0 <= self.coarse_fraction < 1.0:

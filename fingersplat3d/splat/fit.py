@@ -29,7 +29,7 @@ from .losses import PhotometricTarget, photometric_loss, photometric_target
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
 from .shading import facing_cosines, shade
-from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, param_group
+from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, hold_rows, param_group
 
 __all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget", "halved",
            "ridge_periods", "MIN_COARSE_PERIOD_PX",
@@ -67,6 +67,7 @@ class FitTarget:
     depth_valid: torch.Tensor | None = None  # [H, W] bool: mask & finite prior depth
     outside_weight: torch.Tensor | None = None  # [H, W] float: 1 / (pixels off the finger) off it, 0 on it
     depth_weight: torch.Tensor | None = None  # [H, W] float: 1 / (valid pixels * the prior's median) where depth_valid
+    inside_weight: torch.Tensor | None = None  # [H, W] float: 1 / (pixels on the finger) on it, 0 off it
     photometric: PhotometricTarget | None = None
     """The image and mask as :func:`~fingersplat3d.splat.losses.photometric_loss` reads them, prepared once."""
 
@@ -83,9 +84,11 @@ class FitTarget:
             prior, valid = as_tensor(np.where(valid_np, depth, 0.0)), as_tensor(valid_np, torch.bool)
             depth_weight = as_tensor(valid_np / (valid_np.sum() * scale))
         outside = ~np.asarray(mask, bool)
+        inside = ~outside
         image, mask = as_tensor(image), as_tensor(mask, torch.bool)
         return cls(image, mask, as_tensor(camera.K), as_tensor(camera.world_to_cam), view.width, view.height, prior,
-                   valid, as_tensor(outside / max(int(outside.sum()), 1)), depth_weight, photometric_target(image, mask))
+                   valid, as_tensor(outside / max(int(outside.sum()), 1)), depth_weight,
+                   as_tensor(inside / max(int(inside.sum()), 1)), photometric_target(image, mask))
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,19 +221,23 @@ def _optimizer(model: Gaussians, config: SplatConfig, extent: float, n_views: in
 def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[Camera],
                   config: SplatConfig = SplatConfig(), *, budget: int | None = None, device: torch.device | None = None,
                   depths: Sequence[np.ndarray] | None = None, progress: bool = False,
-                  periods: Sequence[float] | None = None) -> SplatFit:
+                  periods: Sequence[float] | None = None, frozen: torch.Tensor | None = None) -> SplatFit:
     """Optimise ``initial`` (and the poses) so the renders match the photos inside the finger.
 
     ``depths``: optional ``[H, W]`` prior depth per view (the geometry stage's, NaN = none); with
     ``lambda_depth > 0`` the rendered depth is kept near it (relative L1 inside the mask). The renders are shaded
     with ``initial.facing_exponent``, which the fitted model keeps. ``periods``: each view's ridge period in pixels
     when already measured (else measured here when ``config.coarse_fraction`` asks for a half-resolution start, which
-    runs only with every period at least :data:`MIN_COARSE_PERIOD_PX`).
+    runs only with every period at least :data:`MIN_COARSE_PERIOD_PX`). ``frozen``: ``[N]`` bool, the rows of
+    ``initial`` kept as they are (their gradients zeroed, so Adam never moves them); only in a fit that adds and
+    removes no Gaussians (``densify_from`` past the last step).
     """
     from tqdm import tqdm
 
     if len(views) != len(cameras) or not views:
         raise ValueError("fit_gaussians needs one camera per view and at least one view")
+    if frozen is not None and (tuple(frozen.shape) != (len(initial),) or config.densify_from <= config.iterations):
+        raise ValueError("fit_gaussians: frozen must be one bool per Gaussian, in a fit without densification")
     device = resolve_device(device)
     started = time.perf_counter()
     model = initial.detach().to(device, torch.float32)
@@ -275,11 +282,15 @@ def fit_gaussians(initial: Gaussians, views: Sequence[View], cameras: Sequence[C
         loss = photometric_loss(out.color, target.photometric, None, config.lambda_dssim)
         if config.lambda_silhouette > 0:  # no opacity off the finger: the model holds no background
             loss = loss + config.lambda_silhouette * (out.alpha * target.outside_weight).sum()
+        if config.lambda_solid > 0:  # a solid finger: nothing behind its skin shows through it
+            loss = loss + config.lambda_solid * ((1.0 - out.alpha) * target.inside_weight).sum()
         if target.depth is not None:  # stay near the aligned geometry: photos alone under-constrain depth
             error = torch.where(target.depth_valid, (out.depth - target.depth).abs(), 0.0)  # relative L1, mean over valid
             loss = loss + config.lambda_depth * (error * target.depth_weight).sum()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        if frozen is not None:
+            hold_rows(optimizer, frozen.to(device))
         optimizer.step()
         losses.append(float(loss.detach()))
         if out.means2d.grad is not None:

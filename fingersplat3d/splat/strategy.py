@@ -17,7 +17,7 @@ from .config import SplatConfig
 from .gaussians import Gaussians
 from ..rotations import quaternion_to_matrix
 
-__all__ = ["DensifyStats", "GradientStats", "densify_and_prune", "replace_rows", "gaussians_of"]
+__all__ = ["DensifyStats", "GradientStats", "densify_and_prune", "hold_rows", "replace_rows", "gaussians_of"]
 
 
 @dataclass
@@ -70,6 +70,15 @@ def _gaussian_groups(optimizer: Adam) -> list[dict]:
 def gaussians_of(optimizer: Adam) -> Gaussians:
     """The model whose fields are the optimiser's parameter groups (see module docstring)."""
     return Gaussians(*(group["params"][0] for group in _gaussian_groups(optimizer)))
+
+
+def hold_rows(optimizer: Adam, rows: torch.Tensor) -> None:
+    """Zero the gradients of the Gaussians ``rows`` (``[N]`` bool) before a step: from zero moments Adam's update is
+    zero, so those Gaussians stay as they are while the others fit around them."""
+    for group in _gaussian_groups(optimizer):
+        parameter = group["params"][0]
+        if parameter.grad is not None:
+            parameter.grad[rows] = 0.0
 
 
 def replace_rows(optimizer: Adam, keep: torch.Tensor, new_rows: tuple[torch.Tensor, ...]) -> None:
