@@ -31,8 +31,8 @@ from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
 from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, working_views
 
-__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "unseen_skin_of", "write_reconstruction", "MIN_VIEWS", "MAX_RESIDUAL_PX",
-           "refuse_focal_with_rig"]
+__all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "unseen_skin_of", "write_reconstruction", "MIN_VIEWS",
+           "MAX_RESIDUAL_PX", "refuse_focal_with_rig"]
 
 MIN_VIEWS = 1  # one image is allowed: it is fused with itself (the paper's monocular mode)
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
@@ -628,8 +628,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                     ensure_compiled(lambda text: bar.set_postfix_str(f"splat: {text}"))
                     bar.set_postfix_str("splat")
                 unseen = unseen_skin_of(cloud, capture.views, cameras, aligned, config.splat)
-                splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean, unseen=unseen,
-                                        depths=depths, device=device, progress=progress,
+                splat = run_splat_stage(capture.views, cameras, aligned, cloud, config.splat, config.clean,
+                                        unseen=unseen, depths=depths, device=device, progress=progress,
                                         periods=scale.working_view_periods_px())
             cameras = splat.cameras
             report["splat"] = splat.report

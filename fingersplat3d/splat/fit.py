@@ -29,7 +29,8 @@ from .losses import PhotometricTarget, photometric_loss, photometric_target
 from .pose import apply_pose_correction
 from .rasterize import RenderOutput, rasterize
 from .shading import facing_cosines, shade
-from .strategy import GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, hold_rows, param_group
+from .strategy import (GAUSSIAN_GROUPS, DensifyStats, GradientStats, densify_and_prune, gaussians_of, hold_rows,
+                       param_group)
 
 __all__ = ["SplatFit", "FitTarget", "fit_gaussians", "fit_camera", "render_camera", "gaussian_budget", "halved",
            "ridge_periods", "MIN_COARSE_PERIOD_PX",

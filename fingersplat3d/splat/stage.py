@@ -25,7 +25,7 @@ __all__ = ["SplatStage", "run_splat_stage", "UNSEEN_OPACITY", "UNSEEN_NEIGHBOURS
 UNSEEN_OPACITY = 0.95  # the unseen skin's Gaussians (run_splat_stage's ``unseen``): as opaque as fitted skin
 UNSEEN_NEIGHBOURS = 16  # fitted Gaussians whose median colour an unseen skin's Gaussian takes
 UNSEEN_START_CELLS = 3  # a run of the unseen skin's cells is kept when it starts this close to its seen arc (cells)
-UNSEEN_MASK_SLACK = 0.01  # of the square root of a mask's area: how far outside a view's outline the unseen skin may lie
+UNSEEN_MASK_SLACK = 0.01  # how far outside a view's outline the unseen skin may lie (of its mask area's square root)
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,8 +53,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
                     periods: Sequence[float] | None = None, unseen=None) -> SplatStage:
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks (``periods``:
     every view's ridge period in pixels, when already measured; ``unseen``: the skin next to ``cloud`` that no fitted
-    view sees, an :class:`~fingersplat3d.unseen_skin.UnseenSkin` (points, normals, chain, steps), completed with Gaussians of the nearest fitted skin's tone after the fit,
-    :func:`_unseen_gaussians`)."""
+    view sees, an :class:`~fingersplat3d.unseen_skin.UnseenSkin` (points, normals, chain, steps), completed after the
+    fit with Gaussians of the nearest fitted skin's tone, :func:`_unseen_gaussians`)."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from .voting import CleanConfig, clean_with_masks
 
@@ -108,7 +108,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     report = {"preset": config.preset or None, "differs_from_preset": differences_from_preset(config),
               "config": asdict(config), "device": str(device), "budget": fit.budget,
               "initial_gaussians": fit.initial_count, "fitted_gaussians": len(fit.gaussians),
-              "gaussians": len(cleaned), "unseen_skin_gaussians": completed, "fit_seconds": round(fit.seconds, 2), "half_resolution_steps": fit.coarse_steps,
+              "gaussians": len(cleaned), "unseen_skin_gaussians": completed, "fit_seconds": round(fit.seconds, 2),
+              "half_resolution_steps": fit.coarse_steps,
               "clean_seconds": round(clean_seconds, 2),
               "polish_seconds": round(polish_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
@@ -127,9 +128,9 @@ def _unseen_gaussians(unseen, fitted: Gaussians, cameras: Sequence[Camera], mask
     :data:`UNSEEN_MASK_SLACK` (the visual hull's rule; not the fit's vote, which keeps a Gaussian two views of three
     put on the finger: a guess has no photo of its own to outvote; nothing split: no photo says where its edge is), and
     every cell beyond such a one along its ring (:func:`_joined`). Dropping those a fitted view sees in front of its
-    fitted surface as well (by 1 % of the camera's distance) left a band next to the
-    seen skin uncovered and changed no training view (measured on two real captures, each with a view left out:
-    placed PSNR 18.5 / 18.8 dB with that test, 19.5 / 20.6 dB without)."""
+    fitted surface as well (by 1 % of the camera's distance) left a band next to the seen skin uncovered and changed
+    no training view (measured on two real captures, each with a view left out: placed PSNR 18.5 / 18.8 dB with that
+    test, 19.5 / 20.6 dB without)."""
     import open3d as o3d
     from scipy.spatial import cKDTree
 
