@@ -20,8 +20,8 @@ in the tone of the nearest fitted skin and without ridges, as no photo saw any: 
 training views, which see that skin only edge-on at their rims, made them transparent. These points never enter
 ``fused.ply``, the registration's depth maps or the prints, which stay what the photos measured.
 
-Pure numpy; the chart's frame comes from the views'
-silhouettes, as the rolled print's does.
+Pure numpy; the chart, its frame from the views' silhouettes and each ring's circle are the rolled print's
+(:mod:`fingersplat3d.prints.skin_chart`).
 """
 from __future__ import annotations
 
@@ -60,20 +60,11 @@ class UnseenSkin:
         return len(self.points)
 
 
-def _circle(u: np.ndarray, w: np.ndarray) -> np.ndarray | None:
-    """``[3]``: the centre ``(cu, cw)`` and radius of the circle through ``(u, w)`` (Kasa's algebraic fit), or None."""
-    design = np.column_stack([u, w, np.ones_like(u)])
-    solution, *_ = np.linalg.lstsq(design, u * u + w * w, rcond=None)
-    cu, cw = solution[0] / 2, solution[1] / 2
-    squared = solution[2] + cu * cu + cw * cw
-    return np.array([cu, cw, np.sqrt(squared)]) if squared > 0 else None
-
-
 def unseen_skin(points: np.ndarray, cameras: Sequence[Camera], masks: Sequence[np.ndarray], *,
                 extend_deg: float = EXTEND_DEG, min_seen_deg: float = MIN_SEEN_DEG) -> UnseenSkin:
     """The unseen skin next to the surface sampled by ``points [N, 3]``, the views' ``cameras`` and ``masks`` giving
     the finger's axis (module docstring). Empty where the points draw no chart."""
-    from .prints.skin_chart import PHI_STEP_DEG, finger_frame, skin_chart
+    from .prints.skin_chart import PHI_STEP_DEG, finger_frame, kasa_circle, skin_chart
     from .segment.silhouette import orient_frames
 
     points = np.asarray(points, np.float64)
@@ -95,7 +86,7 @@ def unseen_skin(points: np.ndarray, cameras: Sequence[Camera], masks: Sequence[n
     circles = np.full((rings, 3), np.nan)
     for ring in range(rings):
         if seen[ring].sum() >= min_cells:
-            circle = _circle(local[ring, seen[ring], 1], local[ring, seen[ring], 2])
+            circle = kasa_circle(local[ring, seen[ring], 1], local[ring, seen[ring], 2])
             if circle is not None:
                 circles[ring] = circle
     fitted = np.isfinite(circles).all(1)

@@ -51,7 +51,7 @@ from scipy import ndimage
 from ..errors import InputError
 from ..scene import Camera
 
-__all__ = ["FingerFrame", "SkinChart", "finger_frame", "skin_chart", "PHI_STEP_DEG"]
+__all__ = ["FingerFrame", "SkinChart", "finger_frame", "skin_chart", "kasa_circle", "PHI_STEP_DEG"]
 
 PHI_STEP_DEG = 2.0  # azimuth cell of the radius grid
 AXIS_ROUNDS = 2  # times the axis is turned onto the fitted centre line (step 2)
@@ -168,6 +168,16 @@ def _rolled(frame: FingerFrame, angle: float) -> FingerFrame:
     return FingerFrame(frame.axis, pad, np.cross(frame.axis, pad), frame.origin, frame.axis_from, "mirror line")
 
 
+def kasa_circle(u: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """``[3]``: the centre ``(cu, cw)`` and radius of the circle through the points ``(u, w)`` (Kasa's algebraic fit:
+    least squares on ``u^2 + w^2 = 2 cu u + 2 cw w + c``), or None where it has no real radius."""
+    design = np.column_stack([u, w, np.ones_like(u)])
+    solution, *_ = np.linalg.lstsq(design, u * u + w * w, rcond=None)
+    cu, cw = solution[0] / 2, solution[1] / 2
+    squared = solution[2] + cu * cu + cw * cw
+    return np.array([cu, cw, np.sqrt(squared)]) if squared > 0 else None
+
+
 def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
     """Quadratic coefficients ``[3, 2]`` of the section centre ``(u, w)`` against ``x`` (module docstring, step 2)."""
     x, u, w = local.T
@@ -177,13 +187,9 @@ def _centre_line(local: np.ndarray, station: float) -> np.ndarray:
         inside = (x >= low) & (x < low + station)
         if inside.sum() < 30:
             continue
-        uu, ww = u[inside], w[inside]
-        design = np.column_stack([uu, ww, np.ones_like(uu)])
-        solution, *_ = np.linalg.lstsq(design, uu * uu + ww * ww, rcond=None)
-        cu, cw = solution[0] / 2, solution[1] / 2
-        radius_sq = solution[2] + cu * cu + cw * cw
-        if radius_sq > 0:
-            found.append((low + 0.5 * station, cu, cw, np.sqrt(radius_sq), inside.sum()))
+        circle = kasa_circle(u[inside], w[inside])
+        if circle is not None:
+            found.append((low + 0.5 * station, *circle, inside.sum()))
     if not found:
         return np.array([[0.0, 0.0], [0.0, 0.0], [np.median(u), np.median(w)]])
     found = np.array(found)

@@ -110,11 +110,12 @@ class SplatConfig:
     """Darken each Gaussian's colour by the cosine at which a camera sees it, to the power of the capture's
     exponent estimated from the registered geometry before the fit (:mod:`~fingersplat3d.splat.shading`);
     False: one colour per Gaussian whatever the view, the plain SH degree 0 model."""
-    # --- the start -------------------------------------------------------------------------------
+    # --- completion ------------------------------------------------------------------------------
     unseen_skin: bool = True
-    """Start Gaussians on the skin next to the fitted views' surface that none of them sees, too
-    (:mod:`fingersplat3d.unseen_skin`: each ring's section carried round, in the ring's tone): a left-out view or a
-    new view past the cameras shows that skin, which a fit of the seen surface alone leaves as a hole."""
+    """After the fit, add Gaussians on the skin next to the fitted views' surface that none of them sees
+    (:mod:`fingersplat3d.unseen_skin`: each ring's circle carried past its seen arc; in the nearest fitted skin's
+    tone, held still in the polish): a left-out view or a new view past the cameras shows that skin, which a fit of
+    the seen surface alone leaves as a hole."""
     # --- rendering -----------------------------------------------------------------------------
     near_fraction: float = 0.01
     """Near plane as a fraction of the camera-to-finger distance."""
