@@ -135,10 +135,11 @@ def test_cli_fuse_on_the_shipped_sample(tmp_path, capsys):
     files = sorted(str(p) for p in (ROOT / "data_samples" / "uwa_seed0" / "images").glob("*.png"))
     from_files = tmp_path / "from_files"
     assert main(["fuse", *files, "-o", str(from_files), "--icp", "--px-per-mm", "17.8", "--splat-preset", "fast",
-                 "--splat-iterations", "2", "--no-shading"]) == 0
+                 "--splat-iterations", "2", "--no-shading", "--no-exposures"]) == 0
     files_report = json.loads((from_files / "report.json").read_text())
     plain_report = files_report["splat"]
-    assert plain_report["differs_from_preset"] == {"iterations": 2, "facing_shading": False}
+    assert plain_report["differs_from_preset"] == {"iterations": 2, "facing_shading": False, "match_exposures": False}
+    assert not plain_report["shading"]["exposures_matched"] and shading["exposures_matched"]
     assert (plain_report["shading"]["facing_exponent"] == 0.0
             and read_gaussians_ply(from_files / "gaussians.ply").facing_exponent == 0.0)
     # A metric reconstruction says mm in cameras.json (the factor that made it so is in report.json).

@@ -1,5 +1,6 @@
 """The model's one view-dependent term: skin darker where a camera sees it at a slant (and the estimate of it)."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from fingersplat3d.splat import Gaussians, rgb_to_sh
 from fingersplat3d.splat.config import SplatConfig
 from fingersplat3d.splat.fit import fit_gaussians, render_camera
 from fingersplat3d.splat.shading import MAX_EXPONENT, MIN_FACING, _facing_cosines_torch, facing_cosines, shade
-from fingersplat3d.splat.shading_estimate import estimate_shading
+from fingersplat3d.splat.shading_estimate import ShadingEstimate, estimate_shading
 
 SIZE = (128, 96)
 
@@ -223,3 +224,39 @@ def test_the_exponent_travels_with_the_model_and_its_ply(tmp_path):
     (tmp_path / "bad.ply").write_bytes(text.replace(f"{EXPONENT_COMMENT} 0.0".encode(), f"{EXPONENT_COMMENT} abc".encode()))
     with pytest.raises(InputError, match="bad.ply.*facing_exponent"):
         read_gaussians_ply(tmp_path / "bad.ply")
+
+
+def test_gains_are_against_the_geometric_mean_of_the_views_asked_for():
+    estimate = ShadingEstimate(0.3, [0.0, math.log(0.8), math.log(1.1)], 1000)
+    assert np.prod(estimate.gains()) == pytest.approx(1.0)
+    gains = estimate.gains([0, 1])
+    assert gains[0] * gains[1] == pytest.approx(1.0) and gains[2] / gains[0] == pytest.approx(1.1)
+    assert np.allclose(ShadingEstimate.none(3).gains(), 1.0)
+
+
+def test_the_splat_stage_fits_every_photo_at_the_views_mean_exposure():
+    import open3d as o3d
+
+    from fingersplat3d.splat.stage import run_splat_stage
+
+    truth = _half_cylinder(0.4)
+    # large enough for the stage's own estimate (every 4th pixel, blurred past the ridges)
+    cameras = [Camera.from_focal(240.0, 280, 210, c.world_to_cam) for c in (_camera(0.0), _camera(-40.0), _camera(40.0))]
+    log_gains = (0.0, math.log(0.75), 0.0)  # the left camera's photo a quarter darker
+    views, depths = _photos(truth, cameras, log_gains)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(truth.means.double().numpy()))
+    cloud.colors = o3d.utility.Vector3dVector(np.full((len(truth), 3), 0.5))
+    config = SplatConfig(iterations=40, densify_from=1000, polish_fraction=0.0, lambda_depth=0.0, min_gaussians=1,
+                         unseen_skin=False)
+    matched = run_splat_stage(views, cameras, [0, 1, 2], cloud, config, depths=depths, device="cpu")
+    plain = run_splat_stage(views, cameras, [0, 1, 2], cloud, replace(config, match_exposures=False), depths=depths,
+                            device="cpu")
+    shading = matched.report["shading"]
+    assert shading["exposures_matched"] and not plain.report["shading"]["exposures_matched"]
+    mean = math.exp(sum(log_gains) / 3)
+    estimated = list(shading["exposure_estimate"].values())
+    assert np.allclose(estimated, [math.exp(g) / mean for g in log_gains], atol=0.04)
+    # each photo fitted at one exposure, so the renders multiplied by it reproduce all three better than one compromise
+    assert min(matched.report["psnr_in_mask_db"].values()) > min(plain.report["psnr_in_mask_db"].values()) + 1.0
+    for report in (matched.report, plain.report):
+        assert all(math.isfinite(v) for v in report["psnr_in_mask_db"].values())

@@ -53,6 +53,10 @@ def add_splat_arguments(parser) -> None:
     splat.add_argument("--no-shading", action="store_true",
                        help="one colour per Gaussian whatever the view (the paper's plain SH degree 0), instead of the "
                             "skin darkening with the slant at which each camera sees it")
+    splat.add_argument("--no-exposures", action="store_true",
+                       help="fit the photos as they are (the paper's), instead of each divided by its camera's "
+                            "exposure, estimated on the skin two views see, so that the Gaussians' colours are the "
+                            "skin at the views' mean exposure")
 
 
 def add_dataset_arguments(parser) -> None:
@@ -74,7 +78,8 @@ def splat_config(args: argparse.Namespace):
 
     return preset(args.splat_preset, iterations=args.splat_iterations, gaussians_per_cell=args.splat_gaussians_per_cell,
                   refine_poses=args.pose_refinement,
-                  facing_shading=False if getattr(args, "no_shading", False) else None)
+                  facing_shading=False if getattr(args, "no_shading", False) else None,
+                  match_exposures=False if getattr(args, "no_exposures", False) else None)
 
 
 def fuse_config(args: argparse.Namespace):

@@ -7,7 +7,10 @@ For each capture (synthetic or real, 2+ views):
 2. for each view ``k``: Gaussians are fitted to the *other* views only, starting from the fused
    cloud of those views (:func:`fingersplat3d.pipeline.cloud_of_views`), and rendered at ``k``'s
    camera ("placed") and again after aligning that camera to the photo with the model frozen
-   (:func:`fingersplat3d.splat.fit.fit_camera`, "aligned", as pose-free 3DGS evaluation does);
+   (:func:`fingersplat3d.splat.fit.fit_camera`, "aligned", as pose-free 3DGS evaluation does); with
+   ``SplatConfig.match_exposures`` (the default) the model is at the fitted views' mean exposure, and both renders
+   are multiplied by ``k``'s exposure against theirs, estimated with the rest of the registration from the skin
+   the registered views share (:mod:`fingersplat3d.splat.shading_estimate`; column ``exposure``), as its camera is;
 3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), and NFIQ2 of the
    real photo and of the aligned render, both as contact-like prints
    (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque and is
@@ -33,8 +36,8 @@ __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
 
 PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
 """The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
-COLUMNS = ("capture", "view", "status", "reason", "train_views", "psnr_placed", "ssim_placed", "psnr", "ssim",
-           "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+COLUMNS = ("capture", "view", "status", "reason", "train_views", "exposure", "psnr_placed", "ssim_placed", "psnr",
+           "ssim", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
 
 
 def _nfiq2(image: np.ndarray, mask: np.ndarray, period_px: float | None = None):
@@ -62,6 +65,7 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
     views = result.capture.views  # with the masks fuse used
     aligned = [v for v, ok in enumerate(result.report["alignment"]["aligned"].values()) if ok]
     device = resolve_device(config.device)
+    exposures = _exposures(result, aligned) if config.splat.match_exposures else None
     rows = []
     for k, view in enumerate(views):
         row = {"capture": name, "view": view.name}
@@ -80,11 +84,13 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
             continue
         model = stage.gaussians.to(device)
         placed = result.cameras[k]
-        before = render_views(model, [(view.name, placed)])[0]
-        after = render_views(model, [(view.name, fit_camera(model, placed, view.image, view.mask))])[0]
+        gain = 1.0 if exposures is None else float(exposures.gains([aligned.index(v) for v in train])[aligned.index(k)])
+        before = _exposed(render_views(model, [(view.name, placed)])[0], gain)
+        camera = fit_camera(model, placed, (view.image / gain).astype(np.float32), view.mask)
+        after = _exposed(render_views(model, [(view.name, camera)])[0], gain)
         scores_before = image_scores(before.image, view.image, view.mask)
         scores = image_scores(after.image, view.image, view.mask)
-        row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train),
+        row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train), exposure=round(gain, 4),
                    psnr_placed=scores_before.psnr, ssim_placed=scores_before.ssim, psnr=scores.psnr, ssim=scores.ssim,
                    fit_s=stage.report["fit_seconds"])
         parts = [gray8(view.image), gray8(after.image)]
@@ -99,6 +105,21 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
         cv2.imwrite(str(out / "views" / f"{name}__{view.name}.png"), side_by_side(parts, 360, 8, cv2.INTER_AREA))
         rows.append(row)
     return rows
+
+
+def _exposures(result, aligned: list[int]):
+    """The registered views' exposures (a :class:`~fingersplat3d.splat.shading_estimate.ShadingEstimate` over
+    ``aligned``, in that order), from the skin they share."""
+    from ..splat.shading_estimate import estimate_shading
+
+    views = [result.capture.views[v] for v in aligned]
+    return estimate_shading([v.image for v in views], [v.mask for v in views], [result.cameras[v] for v in aligned],
+                            [result.depths[v] for v in aligned])
+
+
+def _exposed(render, gain: float):
+    """``render`` (a :class:`~fingersplat3d.splat.novel.NovelView`) at an exposure ``gain`` times the model's."""
+    return render if gain == 1.0 else replace(render, image=np.clip(render.image * gain, 0.0, 1.0).astype(np.float32))
 
 
 def run_quality_evaluation(captures: list[tuple[str, object]], out: Path, config, *, nfiq2: bool = True,
@@ -128,7 +149,8 @@ def summary_markdown(rows: list[dict]) -> str:
     done = [r for r in rows if r["status"] == "done"]
     lines = ["# Synthesized views against the real ones (leave one view out)", "",
              f"{len(done)} of {len(rows)} views scored: Gaussians fitted without the view, rendered at its registered "
-             "camera (placed) and after aligning that camera to the photo with the model frozen (aligned).", ""]
+             "camera (placed) and after aligning that camera to the photo with the model frozen (aligned); both at the "
+             "view's exposure when the model's are matched (column `exposure` of quality.csv).", ""]
     if done:
         lines += ["| capture | view | PSNR dB placed -> aligned | SSIM placed -> aligned | NFIQ2 real | NFIQ2 render |",
                   "|---|---|---|---|---|---|"]

@@ -75,8 +75,10 @@ class SplatConfig:
     """Learning rate of the quaternions."""
     lr_opacity: float = 0.1
     """Learning rate of the opacity logits."""
-    lr_colors: float = 0.05
-    """Learning rate of the SH DC coefficients (20x the 3DGS default; measured in the README)."""
+    lr_colors: float = 0.01
+    """Learning rate of the SH DC coefficients (4x the 3DGS default). 0.05, set for fits of 100 steps, let each
+    Gaussian's colour chase one view: at 0.01 real left-out views +0.5 dB on both fingers (with the exposures
+    matched) and the synthetic held-out views +0.5-0.6 dB (docs/measurements.md, stop 68)."""
     # --- densification and pruning (3DGS's adaptive density control) ----------------------------
     densify_from: int = 100
     """First step that may densify."""
@@ -110,6 +112,13 @@ class SplatConfig:
     """Darken each Gaussian's colour by the cosine at which a camera sees it, to the power of the capture's
     exponent estimated from the registered geometry before the fit (:mod:`~fingersplat3d.splat.shading`);
     False: one colour per Gaussian whatever the view, the plain SH degree 0 model."""
+    match_exposures: bool = True
+    """Fit every photo at the fitted views' mean exposure: each divided by its exposure, estimated with the shading
+    exponent from the skin two registered views see (:mod:`~fingersplat3d.splat.shading_estimate`), so that the
+    Gaussians' colours are the skin at one exposure, not a compromise between cameras that differ by 5-15 % on the
+    real captures. A view rendered to look like its photo is multiplied by its exposure
+    (:meth:`~fingersplat3d.splat.shading_estimate.ShadingEstimate.gains`). Measured (docs/measurements.md): real
+    left-out views +0.4 dB (held-out finger) and +1.5 dB (the finger the splat settings were tuned on)."""
     # --- completion ------------------------------------------------------------------------------
     unseen_skin: bool = True
     """After the fit, add Gaussians on the skin next to the fitted views' surface that none of them sees

@@ -49,6 +49,13 @@ class ShadingEstimate:
         """No estimate: no shading, every exposure 1."""
         return cls(0.0, [0.0] * views, 0)
 
+    def gains(self, among: Sequence[int] | None = None) -> np.ndarray:
+        """Each view's exposure against the geometric mean of the views ``among`` (all by default): the factor a
+        render at that mean exposure is multiplied by to look like the view's photo."""
+        logs = np.asarray(self.log_gains, np.float64)
+        reference = logs[list(among)].mean() if among is not None else logs.mean()
+        return np.exp(logs - reference)
+
 
 def _points_and_normals(camera: Camera, depth: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every ``stride``-th pixel's ``(pixels [h, w, 2], points [h, w, 3], normals [h, w, 3])``; NaN off the depth

@@ -67,6 +67,10 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     initial = _initial_gaussians(cloud, train_views[0].channels, budget, config, config.seed)
     train_depths = [depths[v] for v in fitted_views] if depths is not None else None
     shading = _shading(train_views, train_cameras, train_depths, config)
+    gains = shading.gains() if config.match_exposures else np.ones(len(train_views))
+    train_views = [view if gain == 1.0 else view.with_(image=(view.image / gain).astype(np.float32))
+                   for view, gain in zip(train_views, gains)]  # each photo at the views' mean exposure
+    gain_of = dict(zip(fitted_views, gains))
     fit = fit_gaussians(initial.with_(facing_exponent=shading.exponent), train_views, train_cameras, config,
                         budget=budget, device=device, depths=train_depths, progress=progress, periods=train_periods)
     masks = [view.mask for view in train_views]
@@ -101,7 +105,9 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
             out = render_camera(cleaned, camera, near_plane(cleaned.means, camera, config.near_fraction))
             alpha, color = out.alpha.cpu().numpy(), out.color.cpu().numpy()
             depths.append(np.where((alpha > 0.5) & view.mask, out.depth.cpu().numpy(), np.nan).astype(np.float32))
-            psnrs[view.name] = round(masked_psnr(color[..., 0] if color.shape[-1] == 1 else color, view.image, view.mask), 2)
+            gain = gain_of.get(v, 1.0)  # a fitted photo's own exposure; 1 for the others
+            psnrs[view.name] = round(masked_psnr(np.clip(gain * (color[..., 0] if color.shape[-1] == 1 else color), 0, 1),
+                                                 view.image, view.mask), 2)
             if v in fitted_views:
                 outside_after.append(fraction_alpha_outside(alpha, view.mask))
     corrections = {views[v].name: round(float(rotation_angle_deg(refined[v].rotation, cameras[v].rotation)), 3) for v in fitted_views}
@@ -114,8 +120,9 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
               "polish_seconds": round(polish_seconds, 2),
               "loss_first": fit.losses[0] if fit.losses else None, "loss_last": fit.losses[-1] if fit.losses else None,
               "shading": {"facing_exponent": round(shading.exponent, 4), "points": shading.points,
-                          "exposure_estimate": {train_views[k].name: round(float(np.exp(g)), 4)
-                                                for k, g in enumerate(shading.log_gains)}},
+                          "exposure_estimate": {train_views[k].name: round(float(g), 4)
+                                                for k, g in enumerate(shading.gains())},
+                          "exposures_matched": bool(config.match_exposures and shading.points > 0)},
               "densify": [asdict(d) for d in fit.densify], "psnr_in_mask_db": psnrs,
               "pose_correction_deg": corrections, "clean": asdict(clean_stats), "alpha_outside_mask": {"before": outside_before, "after": round(float(np.mean(outside_after)), 5)}}
     return SplatStage(cleaned.to("cpu"), refined, depths, report)
@@ -179,13 +186,15 @@ def _widened(mask: np.ndarray) -> np.ndarray:
 
 
 def _shading(views: Sequence[View], cameras: Sequence[Camera], depths, config: SplatConfig):
-    """The capture's shading exponent, estimated from the registered geometry (:mod:`.shading_estimate`) when it is
-    on and there is any; else none."""
+    """The capture's shading exponent and the photos' exposures, estimated from the registered geometry
+    (:mod:`.shading_estimate`) when either is asked for and there is any geometry; else none (the exponent 0 when
+    only the exposures are asked for)."""
     from .shading_estimate import ShadingEstimate, estimate_shading
 
-    if not config.facing_shading or depths is None:
+    if not (config.facing_shading or config.match_exposures) or depths is None:
         return ShadingEstimate.none(len(views))
-    return estimate_shading([view.image for view in views], [view.mask for view in views], cameras, depths)
+    estimate = estimate_shading([view.image for view in views], [view.mask for view in views], cameras, depths)
+    return estimate if config.facing_shading else replace(estimate, exponent=0.0)
 
 
 def _alpha_outside(model: Gaussians, cameras: Sequence[Camera], masks, config: SplatConfig) -> float:
