@@ -27,6 +27,8 @@ def test_every_view_is_left_out_and_scored(small_capture, tmp_path, capsys):
         assert 10.0 < float(row["psnr"]) < 60.0 and 0.0 < float(row["ssim"]) <= 1.0
         assert float(row["psnr"]) >= float(row["psnr_placed"]) - 0.5  # the alignment never makes it much worse
         assert row["nfiq2_real"] != "" or row["nfiq2_failure"]
+        # the left-out view rendered at its exposure against the fitted views': one light, one exposure, all alike
+        assert 0.9 < float(row["exposure"]) < 1.1
     assert len(list((out / "views").glob("*.png"))) == 3
     summary = (out / "summary.md").read_text()
     assert "38.13" in summary and "| uwa_small | center |" in summary
