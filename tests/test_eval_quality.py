@@ -29,9 +29,17 @@ def test_every_view_is_left_out_and_scored(small_capture, tmp_path, capsys):
         assert row["nfiq2_real"] != "" or row["nfiq2_failure"]
         # the left-out view rendered at its exposure against the fitted views': one light, one exposure, all alike
         assert 0.9 < float(row["exposure"]) < 1.1
+        # the finger split by where the render comes from: the skin the fitted views saw and the completion's guess;
+        # the two parts' errors make up the whole view's
+        share = float(row["unseen_share"])
+        assert 0.0 <= share <= 1.0 and 10.0 < float(row["psnr_seen"]) < 60.0
+        if row["psnr_unseen"] != "":
+            mse = lambda db: 10.0 ** (-float(db) / 10.0)  # noqa: E731
+            parts = (1.0 - share) * mse(row["psnr_seen"]) + share * mse(row["psnr_unseen"])
+            assert parts == pytest.approx(mse(row["psnr"]), rel=1e-3)
     assert len(list((out / "views").glob("*.png"))) == 3
     summary = (out / "summary.md").read_text()
-    assert "38.13" in summary and "| uwa_small | center |" in summary
+    assert "38.13" in summary and "| uwa_small | center |" in summary and "skin the fitted views saw" in summary
     assert "mean PSNR" in capsys.readouterr().out
 
 

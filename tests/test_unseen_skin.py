@@ -112,7 +112,9 @@ def test_a_left_out_view_of_the_sample_is_covered_where_the_fitted_views_see_not
     from fingersplat3d.cli.common import named_captures
     from fingersplat3d.pipeline import FuseConfig, cloud_of_views, fuse, unseen_skin_of
     from fingersplat3d.splat.config import preset
-    from fingersplat3d.splat.novel import render_views
+    import torch
+
+    from fingersplat3d.splat.novel import opacity_share, render_views
     from fingersplat3d.splat.stage import run_splat_stage
 
     (_, capture), = named_captures([Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed0"])
@@ -123,13 +125,23 @@ def test_a_left_out_view_of_the_sample_is_covered_where_the_fitted_views_see_not
     unseen = unseen_skin_of(cloud, views, result.cameras, train, config)
     assert unseen is not None and len(unseen) > 100
 
+    mask = views[left_out].mask
+
     def hole(skin):
         stage = run_splat_stage(views, result.cameras, train, cloud, config, depths=result.depths, unseen=skin)
         render = render_views(stage.gaussians, [("left out", result.cameras[left_out])])[0]
-        mask = views[left_out].mask
-        return float(((render.alpha < 0.5) & mask).sum() / mask.sum()), stage.report["unseen_skin_gaussians"]
+        return render, stage
 
-    without, none = hole(None)
-    with_skin, added = hole(unseen)
-    assert none == 0 and added > 0
+    (bare, plain), (covered, completed) = hole(None), hole(unseen)
+    without, with_skin = (float(((r.alpha < 0.5) & mask).sum() / mask.sum()) for r in (bare, covered))
+    added = completed.report["unseen_skin_gaussians"]
+    assert plain.report["unseen_skin_gaussians"] == 0 and added > 0
     assert with_skin < without - 0.02
+    # the completion is the model's last rows (what `fs3d eval quality` splits its scores by): the holes it fills are
+    # rendered mostly from them, the skin both models cover mostly from the fitted Gaussians
+    model = completed.gaussians
+    share = opacity_share(model, torch.arange(len(model)) >= len(model) - added, result.cameras[left_out])
+    filled = mask & (bare.alpha < 0.5) & (covered.alpha >= 0.5)
+    both = mask & (bare.alpha >= 0.5) & (covered.alpha >= 0.5)
+    assert filled.sum() > 100 and (share[filled] >= 0.5).mean() > 0.7
+    assert (share[both] < 0.5).mean() > 0.8

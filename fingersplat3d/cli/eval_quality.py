@@ -23,7 +23,9 @@ def add(actions) -> None:
         description="Register every view of each capture, then for each view fit Gaussians to the other views only, "
                     "render the left-out view at its camera (placed, and aligned to the photo with the model frozen) "
                     "and score it against the photo inside the finger mask: PSNR, SSIM, and NFIQ2 of the photo and "
-                    "of the render as contact-like prints. Writes quality.csv, views/ and summary.md.")
+                    "of the render as contact-like prints; the PSNR also apart on the skin the fitted views saw and on "
+                    "the skin none of them saw, which the model completes with a guess (columns psnr_seen, "
+                    "psnr_unseen, unseen_share). Writes quality.csv, views/ and summary.md.")
     quality.add_argument("inputs", nargs="+", type=Path,
                          help="capture folders, folders of UWA / CFPose images, or image files of one capture")
     quality.add_argument("--splat-preset", choices=sorted(PRESETS), default="fast",

@@ -11,7 +11,9 @@ For each capture (synthetic or real, 2+ views):
    ``SplatConfig.match_exposures`` (the default) the model is at the fitted views' mean exposure, and both renders
    are multiplied by ``k``'s exposure against theirs, estimated with the rest of the registration from the skin
    the registered views share (:mod:`fingersplat3d.splat.shading_estimate`; column ``exposure``), as its camera is;
-3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), and NFIQ2 of the
+3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), the PSNR again on the skin the
+   fitted views saw and on the unseen skin's completion apart (``psnr_seen``, ``psnr_unseen``; ``unseen_share``: the
+   share of the finger rendered mostly from the completion, which is a guess of skin no fitted photo shows), and NFIQ2 of the
    real photo and of the aligned render, both as contact-like prints
    (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque and is
    scaled by the photo's ridge period: a blurred render must not read as a coarser finger).
@@ -37,7 +39,10 @@ __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
 PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
 """The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
 COLUMNS = ("capture", "view", "status", "reason", "train_views", "exposure", "psnr_placed", "ssim_placed", "psnr",
-           "ssim", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+           "ssim", "unseen_share", "psnr_seen", "psnr_unseen", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+MIN_PART_PIXELS = 500
+"""A part of the finger (the skin the fitted views saw, or the unseen skin's completion) smaller than this many pixels
+in the left-out view gets no PSNR of its own (an empty cell): too few pixels to say anything."""
 
 
 def _nfiq2(image: np.ndarray, mask: np.ndarray, period_px: float | None = None):
@@ -90,9 +95,10 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
         after = _exposed(render_views(model, [(view.name, camera)])[0], gain)
         scores_before = image_scores(before.image, view.image, view.mask)
         scores = image_scores(after.image, view.image, view.mask)
+        split = _by_part(model, int(stage.report.get("unseen_skin_gaussians", 0)), camera, after.image, view)
         row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train), exposure=round(gain, 4),
                    psnr_placed=scores_before.psnr, ssim_placed=scores_before.ssim, psnr=scores.psnr, ssim=scores.ssim,
-                   fit_s=stage.report["fit_seconds"])
+                   **split, fit_s=stage.report["fit_seconds"])
         parts = [gray8(view.image), gray8(after.image)]
         if nfiq2:
             real, real_failure, real_print, period = _nfiq2(view.image, view.mask)
@@ -105,6 +111,27 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
         cv2.imwrite(str(out / "views" / f"{name}__{view.name}.png"), side_by_side(parts, 360, 8, cv2.INTER_AREA))
         rows.append(row)
     return rows
+
+
+def _by_part(model, completed: int, camera, render: np.ndarray, view) -> dict:
+    """The left-out view's finger split by where its render comes from: ``unseen_share``, the share of its mask
+    pixels rendered mostly (half their opacity or more) by the unseen skin's Gaussians (the last ``completed`` of the
+    model, :func:`~fingersplat3d.splat.stage.run_splat_stage`'s completion: a guess, no photo saw it), and the PSNR of
+    the render on each part (empty where a part has under :data:`MIN_PART_PIXELS` pixels)."""
+    import torch
+
+    from ..eval.image import masked_psnr
+    from ..splat.novel import opacity_share
+
+    mask = np.asarray(view.mask, bool)
+    unseen = np.zeros_like(mask)
+    if completed > 0:
+        selected = torch.arange(len(model), device=model.means.device) >= len(model) - completed
+        unseen = (opacity_share(model, selected, camera) >= 0.5) & mask
+    seen = mask & ~unseen
+    psnr = lambda part: masked_psnr(render, view.image, part) if part.sum() >= MIN_PART_PIXELS else ""  # noqa: E731
+    return {"unseen_share": round(float(unseen.sum()) / max(int(mask.sum()), 1), 4), "psnr_seen": psnr(seen),
+            "psnr_unseen": psnr(unseen)}
 
 
 def _exposures(result, aligned: list[int]):
@@ -159,7 +186,10 @@ def summary_markdown(rows: list[dict]) -> str:
                          f"{r['ssim_placed']:.3f} -> {r['ssim']:.3f} | {r.get('nfiq2_real', '') or '—'} | "
                          f"{r.get('nfiq2_render', '') or '—'} |")
         lines += ["", "| mean over views | value | views |", "|---|---|---|"]
-        for key, label in (("psnr", "PSNR dB (aligned)"), ("ssim", "SSIM (aligned)"), ("nfiq2_real", "NFIQ2 real"),
+        for key, label in (("psnr", "PSNR dB (aligned)"), ("ssim", "SSIM (aligned)"),
+                           ("psnr_seen", "PSNR dB on the skin the fitted views saw"),
+                           ("psnr_unseen", "PSNR dB on the unseen skin's completion (a guess)"),
+                           ("unseen_share", "share of the finger rendered from the completion"), ("nfiq2_real", "NFIQ2 real"),
                            ("nfiq2_render", "NFIQ2 render")):
             value, count = _mean(done, key)
             if value is not None:

@@ -16,7 +16,7 @@ from .camera_path import arc_cameras
 from .fit import near_plane, render_camera
 from .gaussians import Gaussians
 
-__all__ = ["NovelView", "render_views", "arc_views"]
+__all__ = ["NovelView", "render_views", "arc_views", "opacity_share"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +40,25 @@ def render_views(gaussians: Gaussians, cameras: Sequence[tuple[str, Camera]], *,
             depth = np.where(alpha >= min_alpha, out.depth.cpu().numpy(), np.nan).astype(np.float32)
             views.append(NovelView(name, camera, image[..., 0] if image.shape[-1] == 1 else image, alpha, depth))
     return views
+
+
+def opacity_share(gaussians: Gaussians, selected: torch.Tensor, camera: Camera, *, near_fraction: float = 0.01) -> np.ndarray:
+    """``[H, W]`` float32 in [0, 1]: the share of each pixel's accumulated opacity that the ``selected`` Gaussians
+    (``[N]`` bool) make, seen from ``camera`` (0 where nothing is opaque). The model rendered once with each
+    Gaussian's colour 1 when selected and 0 when not, unshaded, and divided by its opacity: where a pixel is the
+    blend of several Gaussians, each counts by its own weight in the blend."""
+    from .gaussians import rgb_to_sh
+
+    selected = torch.as_tensor(selected, dtype=torch.bool, device=gaussians.means.device)
+    if tuple(selected.shape) != (len(gaussians),):
+        raise ValueError(f"opacity_share: selected must be one bool per Gaussian ({len(gaussians)}), got {tuple(selected.shape)}")
+    colour = selected.to(gaussians.sh_dc.dtype)[:, None].expand(-1, gaussians.sh_dc.shape[1])
+    marked = gaussians.with_(sh_dc=rgb_to_sh(colour).contiguous(), facing_exponent=0.0)
+    with torch.no_grad():
+        out = render_camera(marked, camera, near_plane(marked.means, camera, near_fraction))
+        marked_alpha, alpha = out.color.mean(-1).cpu().numpy(), out.alpha.cpu().numpy()
+    share = np.divide(marked_alpha, alpha, out=np.zeros_like(alpha), where=alpha > 1e-6)
+    return np.clip(share, 0.0, 1.0).astype(np.float32)
 
 
 def arc_views(gaussians: Gaussians, cameras: Sequence[Camera], count: int) -> list[NovelView]:

@@ -54,7 +54,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks (``periods``:
     every view's ridge period in pixels, when already measured; ``unseen``: the skin next to ``cloud`` that no fitted
     view sees, an :class:`~fingersplat3d.unseen_skin.UnseenSkin` (points, normals, chain, steps), completed after the
-    fit with Gaussians of the nearest fitted skin's tone, :func:`_unseen_gaussians`)."""
+    fit with Gaussians of the nearest fitted skin's tone, :func:`_unseen_gaussians`; they are the model's last
+    ``report["unseen_skin_gaussians"]`` rows, which ``fs3d eval quality`` scores apart)."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from .voting import CleanConfig, clean_with_masks
 
