@@ -112,8 +112,6 @@ def test_a_left_out_view_of_the_sample_is_covered_where_the_fitted_views_see_not
     from fingersplat3d.cli.common import named_captures
     from fingersplat3d.pipeline import FuseConfig, cloud_of_views, fuse, unseen_skin_of
     from fingersplat3d.splat.config import preset
-    import torch
-
     from fingersplat3d.splat.novel import opacity_share, render_views
     from fingersplat3d.splat.stage import run_splat_stage
 
@@ -136,11 +134,11 @@ def test_a_left_out_view_of_the_sample_is_covered_where_the_fitted_views_see_not
     without, with_skin = (float(((r.alpha < 0.5) & mask).sum() / mask.sum()) for r in (bare, covered))
     added = completed.report["unseen_skin_gaussians"]
     assert plain.report["unseen_skin_gaussians"] == 0 and added > 0
+    assert not plain.unseen.any() and int(completed.unseen.sum()) == added and bool(completed.unseen[-added:].all())
     assert with_skin < without - 0.02
     # the completion is the model's last rows (what `fs3d eval quality` splits its scores by): the holes it fills are
     # rendered mostly from them, the skin both models cover mostly from the fitted Gaussians
-    model = completed.gaussians
-    share = opacity_share(model, torch.arange(len(model)) >= len(model) - added, result.cameras[left_out])
+    share = opacity_share(completed.gaussians, completed.unseen, result.cameras[left_out])
     filled = mask & (bare.alpha < 0.5) & (covered.alpha >= 0.5)
     both = mask & (bare.alpha >= 0.5) & (covered.alpha >= 0.5)
     assert filled.sum() > 100 and (share[filled] >= 0.5).mean() > 0.7

@@ -95,7 +95,7 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
         after = _exposed(render_views(model, [(view.name, camera)])[0], gain)
         scores_before = image_scores(before.image, view.image, view.mask)
         scores = image_scores(after.image, view.image, view.mask)
-        split = _by_part(model, int(stage.report.get("unseen_skin_gaussians", 0)), camera, after.image, view)
+        split = _by_part(model, stage.unseen, camera, after.image, view)
         row.update(status="done", reason="", train_views=" ".join(views[v].name for v in train), exposure=round(gain, 4),
                    psnr_placed=scores_before.psnr, ssim_placed=scores_before.ssim, psnr=scores.psnr, ssim=scores.ssim,
                    **split, fit_s=stage.report["fit_seconds"])
@@ -113,21 +113,18 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
     return rows
 
 
-def _by_part(model, completed: int, camera, render: np.ndarray, view) -> dict:
+def _by_part(model, completion, camera, render: np.ndarray, view) -> dict:
     """The left-out view's finger split by where its render comes from: ``unseen_share``, the share of its mask
-    pixels rendered mostly (half their opacity or more) by the unseen skin's Gaussians (the last ``completed`` of the
-    model, :func:`~fingersplat3d.splat.stage.run_splat_stage`'s completion: a guess, no photo saw it), and the PSNR of
-    the render on each part (empty where a part has under :data:`MIN_PART_PIXELS` pixels)."""
-    import torch
-
+    pixels rendered mostly (half their opacity or more) by the ``completion`` rows of the model (``[N]`` bool,
+    :attr:`~fingersplat3d.splat.stage.SplatStage.unseen`: a guess, no photo saw that skin), and the PSNR of the render
+    on each part (empty where a part has under :data:`MIN_PART_PIXELS` pixels)."""
     from ..eval.image import masked_psnr
     from ..splat.novel import opacity_share
 
     mask = np.asarray(view.mask, bool)
     unseen = np.zeros_like(mask)
-    if completed > 0:
-        selected = torch.arange(len(model), device=model.means.device) >= len(model) - completed
-        unseen = (opacity_share(model, selected, camera) >= 0.5) & mask
+    if bool(completion.any()):
+        unseen = (opacity_share(model, completion, camera) >= 0.5) & mask
     seen = mask & ~unseen
     psnr = lambda part: masked_psnr(render, view.image, part) if part.sum() >= MIN_PART_PIXELS else ""  # noqa: E731
     return {"unseen_share": round(float(unseen.sum()) / max(int(mask.sum()), 1), 4), "psnr_seen": psnr(seen),

@@ -35,6 +35,13 @@ class SplatStage:
     depths: list[np.ndarray]  # [H, W] float32 expected depth of the fitted model per view, NaN off the finger
     report: dict
 
+    @property
+    def unseen(self) -> torch.Tensor:
+        """``[N]`` bool: the Gaussians that complete the skin no fitted view sees (:func:`_unseen_gaussians`, a guess:
+        no photo shows it), the model's last ``report["unseen_skin_gaussians"]`` rows; the others were fitted."""
+        count = len(self.gaussians)
+        return torch.arange(count) >= count - int(self.report.get("unseen_skin_gaussians", 0))
+
 
 def _initial_gaussians(cloud, channels: int, budget: int, config: SplatConfig, seed: int) -> Gaussians:
     from .init import gaussians_from_cloud
@@ -54,8 +61,8 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     """Fit Gaussians to ``views[fitted_views]`` starting from ``cloud``, then clean them with the masks (``periods``:
     every view's ridge period in pixels, when already measured; ``unseen``: the skin next to ``cloud`` that no fitted
     view sees, an :class:`~fingersplat3d.unseen_skin.UnseenSkin` (points, normals, chain, steps), completed after the
-    fit with Gaussians of the nearest fitted skin's tone, :func:`_unseen_gaussians`; they are the model's last
-    ``report["unseen_skin_gaussians"]`` rows, which ``fs3d eval quality`` scores apart)."""
+    fit with Gaussians of the nearest fitted skin's tone, :func:`_unseen_gaussians`, the model's last rows:
+    :attr:`SplatStage.unseen`)."""
     from ..eval.image import fraction_alpha_outside, masked_psnr
     from .voting import CleanConfig, clean_with_masks
 
