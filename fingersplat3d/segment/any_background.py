@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
+from .morphology import disc
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 from .silhouette import widest_disc
 
@@ -137,8 +138,7 @@ def _to_border(finger: np.ndarray, width: int) -> np.ndarray:
 def _largest_ridge_area(ridged: np.ndarray) -> tuple[np.ndarray, int] | None:
     """The largest area of ``ridged`` pixels once an opening has dropped lines (the edges of other things), and its
     size; None when nothing is left."""
-    opened = cv2.morphologyEx(ridged.view(np.uint8), cv2.MORPH_OPEN,
-                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEED_RADIUS + 1,) * 2))
+    opened = cv2.morphologyEx(ridged.view(np.uint8), cv2.MORPH_OPEN, disc(SEED_RADIUS))
     count, blobs, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
     if count < 2:
         return None

@@ -49,6 +49,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..robust import robust_sigma
+from .morphology import disc
 from .neighbours import one_finger
 from .regions import crest_level, fill_holes, gradient_magnitude, largest_component, local_sums
 
@@ -104,13 +105,13 @@ def _bright_mask(brightness: np.ndarray, name: str) -> np.ndarray:
     threshold = _crest_level(smooth, threshold, floor)
     # Skin darker than the midpoint (valleys, a crease, the shaded side) still clears the noise
     # floor; that low mask, eroded past its outward bias, fills such notches without moving edges.
-    low = cv2.erode((smooth > floor).view(np.uint8), _disc(LOW_MASK_EROSION_PX), borderType=cv2.BORDER_REPLICATE)
+    low = cv2.erode((smooth > floor).view(np.uint8), disc(LOW_MASK_EROSION_PX), borderType=cv2.BORDER_REPLICATE)
     high = (smooth > threshold).view(np.uint8)
     radius = max(1, round(0.005 * max(height, width)))
-    kernel = _disc(radius)
+    kernel = disc(radius)
     # Only notches of the skin mask are filled from the low mask: a dim glow or a support under
     # the finger clears the noise floor too, but it is not enclosed by skin.
-    notches = cv2.morphologyEx(high, cv2.MORPH_CLOSE, _disc(NOTCH_RADIUS_SCALE * radius), borderType=cv2.BORDER_REPLICATE)
+    notches = cv2.morphologyEx(high, cv2.MORPH_CLOSE, disc(NOTCH_RADIUS_SCALE * radius), borderType=cv2.BORDER_REPLICATE)
     mask = high.view(bool) | (low.view(bool) & notches.view(bool))
     mask8 = mask.view(np.uint8)
     # Close then open; the border is replicated so a finger cut by the frame stays cut straight.
@@ -191,10 +192,6 @@ def _brightness(image: np.ndarray, name: str) -> np.ndarray:
     if not np.isfinite(array.sum(dtype=np.float64)):  # NaN and Inf survive a sum
         raise InputError(f"{name}: the image contains NaN or Inf")
     return np.ascontiguousarray(array)
-
-
-def _disc(radius: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
 def _thresholds(smooth: np.ndarray, name: str) -> tuple[float, np.ndarray]:

@@ -186,11 +186,9 @@ def _joined(on_finger: np.ndarray, chain: np.ndarray, steps: np.ndarray) -> np.n
 def _widened(mask: np.ndarray) -> np.ndarray:
     """``mask`` dilated by :data:`UNSEEN_MASK_SLACK` of its finger's size: the unseen skin next to a view's rim is seen
     edge-on there, and its section, drawn from the seen arc, lands a few pixels either side of the outline."""
-    import cv2
+    from ..segment.morphology import dilated
 
-    radius = max(1, int(round(UNSEEN_MASK_SLACK * np.sqrt(max(int(mask.sum()), 1)))))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-    return cv2.dilate(mask.astype(np.uint8), disc).astype(bool)
+    return dilated(mask, max(1, int(round(UNSEEN_MASK_SLACK * np.sqrt(max(int(mask.sum()), 1))))))
 
 
 def _shading(views: Sequence[View], cameras: Sequence[Camera], depths, config: SplatConfig):

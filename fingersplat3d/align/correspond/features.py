@@ -54,6 +54,7 @@ import cv2
 import numpy as np
 
 from ...errors import InputError
+from ...segment.morphology import eroded
 from .epipolar import fundamental_inliers, sampson_distance
 from .texture import as_gray, estimate_ridge_period, ridge_texture
 
@@ -124,9 +125,7 @@ def _validate(image, mask, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _erode(mask: np.ndarray, radius: float) -> np.ndarray:
-    radius = max(1, int(round(radius)))
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-    return cv2.erode(mask.astype(np.uint8), kernel) > 0
+    return eroded(mask, max(1, int(round(radius))))
 
 
 def _to_uint8(gray: np.ndarray, mask: np.ndarray) -> np.ndarray:

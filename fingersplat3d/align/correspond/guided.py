@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from ...device import cpu_threads, per_item
+from ...segment.morphology import eroded
 from .texture import structure_products
 
 __all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_jacobian", "match_guided", "structure_information"]
@@ -114,11 +115,10 @@ class RidgeMaps:
         self._derived: dict = {}
 
     def inner(self, size: int) -> np.ndarray:
-        """The mask eroded by an elliptic (disc) structuring element ``size`` pixels across."""
+        """The mask eroded by a disc ``size`` (odd) pixels across."""
         key = ("inner", size)
         if key not in self._derived:
-            element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-            self._derived[key] = cv2.erode(self.mask.astype(np.uint8), element) > 0
+            self._derived[key] = eroded(self.mask, size // 2)
         return self._derived[key]
 
     def information(self, uv: np.ndarray, half: int) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...robust import robust_sigma
+from ...segment.morphology import dilated, disc, eroded
 
 __all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture", "structure_products",
            "DEFAULT_PERIOD_PX", "MIN_RIDGES_ACROSS", "no_ridges"]
@@ -184,17 +185,15 @@ def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor:
     ridge crest gets), and more than the sensor noise could. Ridges stay as they are.
     """
     gray = np.asarray(gray, np.float32)
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)
-    opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, disc)
+    opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, disc(radius))
     top_hat = gray - opened
     inside = top_hat[mask]
     if inside.size < 16:
         return gray
     local = np.sqrt(cv2.GaussianBlur(top_hat * top_hat, (0, 0), 6.0 * (radius + 1)))
     noise = robust_sigma(inside)
-    inner = cv2.erode(np.asarray(mask, np.uint8), disc, iterations=2) > 0  # the outline's step is no glint
-    glint = (top_hat > factor * np.maximum(local, noise)) & inner
-    glint = cv2.dilate(glint.astype(np.uint8), disc) > 0
+    inner = eroded(mask, radius, iterations=2)  # the outline's step is no glint
+    glint = dilated((top_hat > factor * np.maximum(local, noise)) & inner, radius)
     return np.where(glint, opened, gray)
 
 
