@@ -222,7 +222,8 @@ degrees (0.25): at grazing angles the ridges are foreshortened into another freq
 
 def facing_weight(cosine: np.ndarray) -> np.ndarray:
     """0 -> 1 ramp of the smaller facing cosine between :data:`FACING_LOW` and :data:`FACING_HIGH`."""
-    return np.clip((np.nan_to_num(cosine, nan=0.0) - FACING_LOW) / (FACING_HIGH - FACING_LOW), 0.0, 1.0)
+    cosine = np.clip(np.nan_to_num(cosine, nan=0.0), -1.0, 1.0)  # a cosine is in [-1, 1]: no overflow past it
+    return np.clip((cosine - FACING_LOW) / (FACING_HIGH - FACING_LOW), 0.0, 1.0)
 
 
 def _surface_normals(depth: np.ndarray, uv: np.ndarray, focal: float, centre: np.ndarray, step: float = 2.0):
