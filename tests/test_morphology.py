@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.segment.morphology import dilated, disc, eroded
+from fingersplat3d.segment.morphology import dilated, disc, eroded, outline
 
 
 @pytest.mark.parametrize("radius", [0, 1, 2, 5, 12])
@@ -38,3 +38,22 @@ def test_a_mask_at_the_frame_is_not_eaten_from_it():
     mask = np.zeros((30, 30), bool)
     mask[:, :15] = True
     assert eroded(mask, 2)[:, 0].all()
+
+
+def test_outline_is_the_8_connected_rim_and_not_the_frame():
+    mask = np.zeros((40, 40), bool)
+    mask[10:30, 5:25] = True
+    rim = outline(mask)
+    assert rim.dtype == bool and (rim <= mask).all()
+    assert rim.sum() == 4 * 20 - 4  # a square's one-pixel rim
+    assert not rim[11:29, 6:24].any()
+    disk = np.hypot(*np.mgrid[-20:21, -20:21]) <= 15
+    inner = disk & ~outline(disk)  # what is left has all eight neighbours in the disc: the rim's diagonal steps are in it
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            assert np.roll(np.roll(disk, dy, 0), dx, 1)[inner].all()
+    assert (disk & ~eroded(disk, 1)).sum() < outline(disk).sum()  # the cross of disc(1) leaves diagonal steps out
+    touching = np.zeros((20, 20), bool)
+    touching[:, :8] = True
+    assert not outline(touching)[:, 0].any() and outline(touching)[:, 7].all()
+    assert not outline(np.zeros((5, 5), bool)).any()

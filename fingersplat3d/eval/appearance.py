@@ -27,6 +27,7 @@ import numpy as np
 
 from ..align.correspond.texture import as_gray, estimate_ridge_period, suppress_glints
 from ..robust import robust_sigma
+from ..segment.morphology import outline
 from ..segment.silhouette import silhouette_frame
 
 __all__ = ["ImageStatistics", "image_statistics"]
@@ -76,7 +77,7 @@ def _edge_blur(gray: np.ndarray, mask: np.ndarray, skin: float, background: floa
     smooth = cv2.GaussianBlur(gray, (0, 0), 0.7)
     grad = np.hypot(cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3)) / 8.0
     peak = cv2.dilate(grad, np.ones((9, 9), np.uint8))
-    edge = mask & ~cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    edge = outline(mask)
     rows, cols = mask.shape
     edge[[0, -1], :] = False
     edge[:, [0, -1]] = False

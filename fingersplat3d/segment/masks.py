@@ -49,7 +49,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..robust import robust_sigma
-from .morphology import disc
+from .morphology import disc, outline
 from .neighbours import one_finger
 from .regions import crest_level, fill_holes, gradient_magnitude, largest_component, local_sums
 
@@ -169,12 +169,8 @@ def outline_offset_px(found: np.ndarray, truth: np.ndarray) -> tuple[float, floa
         raise ValueError(f"masks have different shapes {found.shape} and {truth.shape}")
     if not found.any() or not truth.any():
         return float("nan"), float("nan")
-
-    def edge(mask: np.ndarray) -> np.ndarray:
-        return mask & ~cv2.erode(mask.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
-
-    distance = cv2.distanceTransform((~edge(truth)).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    on = edge(found)
+    distance = cv2.distanceTransform((~outline(truth)).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    on = outline(found)
     signed = np.where(truth[on], -distance[on], distance[on])
     return float(np.median(signed)), float(np.percentile(np.abs(signed), 90))
 

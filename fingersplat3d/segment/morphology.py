@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["disc", "eroded", "dilated"]
+__all__ = ["disc", "eroded", "dilated", "outline"]
 
 
 def disc(radius: int) -> np.ndarray:
@@ -27,3 +27,11 @@ def eroded(mask: np.ndarray, radius: int, iterations: int = 1) -> np.ndarray:
 def dilated(mask: np.ndarray, radius: int) -> np.ndarray:
     """``mask`` (bool) dilated by :func:`disc` of ``radius``."""
     return cv2.dilate(np.asarray(mask, np.uint8), disc(radius)) > 0
+
+
+def outline(mask: np.ndarray) -> np.ndarray:
+    """The pixels of ``mask`` (bool) with one of their eight neighbours outside it: its one-pixel, 8-connected rim (a
+    3×3 square, not :func:`disc`, whose 4-neighbour cross would leave the rim's diagonal steps out). Pixels beyond the
+    frame count as set, so the frame's edge is no outline."""
+    mask = np.asarray(mask, bool)
+    return mask & ~(cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
