@@ -440,9 +440,10 @@ def test_a_backend_without_points_on_the_finger_is_one_sentence(two_fingers):
     raises_naming("gave no finite 3D point on the finger", fuse, load_image_folder(two_fingers), FuseConfig(backend="empty", splat=None))
 
 
-def test_truncated_jpeg_is_named(tmp_path):
-    """An interrupted copy: OpenCV decodes what is there and fills the rest grey; the reader refuses it instead, while
-    a whole JPEG with data appended after its end (as cameras append a second picture) still reads."""
+def test_truncated_jpeg_is_named(tmp_path, capfd):
+    """An interrupted copy: OpenCV decodes what is there and fills the rest grey; the reader refuses it instead, before
+    decoding (libjpeg's own complaint on stderr would stand above the sentence), while a whole JPEG with data appended
+    after its end (as cameras append a second picture) still reads."""
     from fingersplat3d.io.images import read_image
 
     rng = np.random.default_rng(1)
@@ -450,7 +451,9 @@ def test_truncated_jpeg_is_named(tmp_path):
     ok, encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
     data = encoded.tobytes()
     (tmp_path / "cut.jpg").write_bytes(data[: len(data) * 2 // 3])
+    capfd.readouterr()
     assert "truncated" in raises_naming("cut.jpg", read_image, tmp_path / "cut.jpg")
+    assert capfd.readouterr().err == ""
     (tmp_path / "whole.jpg").write_bytes(data + data + b"\xff\xda trailing bytes")
     assert read_image(tmp_path / "whole.jpg").shape == (64, 80)
     (tmp_path / "progressive.jpg").write_bytes(

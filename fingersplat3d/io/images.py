@@ -56,11 +56,13 @@ def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
         raise input_error(path, "file not found")
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
-    raw = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if upright else cv2.IMREAD_UNCHANGED)
+    data = path.read_bytes()
+    # Checked before decoding: OpenCV would fill the missing rows grey and print libjpeg's complaint above the error.
+    if path.suffix.lower() in (".jpg", ".jpeg") and _jpeg_truncated(data):
+        raise input_error(path, "truncated JPEG: the file ends inside its image data (an interrupted copy or download?)")
+    raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if upright else cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
         raise input_error(path, "not a readable image (corrupt or unsupported format)")
-    if path.suffix.lower() in (".jpg", ".jpeg") and _jpeg_truncated(path.read_bytes()):
-        raise input_error(path, "truncated JPEG: the file ends inside its image data (an interrupted copy or download?)")
     return raw
 
 
