@@ -123,3 +123,30 @@ def test_a_dying_worker_is_a_recorded_failure_not_a_crash(ray_local):
     assert seen[1] == (10, None) and seen[3] == (30, None)
     assert seen[2][0] is None and seen[2][1]  # one sentence saying why
     assert figures["tasks"] == 3 and figures["cpus"] == 2
+
+
+def test_a_capture_with_no_view_registered_keeps_its_reason_and_files(tmp_path, small_capture, monkeypatch):
+    """No view registered leaves the residual NaN: the row holds none (JSON has no NaN), not a JSON error as its reason,
+    and the capture's files are written (run in this process, no Ray)."""
+    import math
+
+    import fingersplat3d.pipeline as pipeline
+    from fingersplat3d.batch.task import BatchOptions, process_capture
+    from fingersplat3d.io.jobs import list_jobs
+    from fingersplat3d.pipeline import FuseConfig
+
+    real_fuse = pipeline.fuse
+
+    def unregistered(capture, config, rig=None):
+        result = real_fuse(capture, config, rig=rig)
+        result.report["alignment"].update(residual_px=math.nan, reason="f1, f2: the views agree at 5 % (test)")
+        return result
+
+    monkeypatch.setattr(pipeline, "fuse", unregistered)
+    write_capture(small_capture, tmp_path / "dataset" / "lone")
+    job = list_jobs([tmp_path / "dataset"])[0]
+    row = process_capture(job, str(tmp_path / "out"), BatchOptions(FuseConfig(splat=None), render=0))
+    assert row["reason"] == "f1, f2: the views agree at 5 % (test)" and row["residual_px"] is None
+    assert row["focal_px"] is not None and math.isfinite(row["focal_px"])
+    written = json.loads((tmp_path / "out" / "lone" / "batch.json").read_text())
+    assert written["residual_px"] is None and (tmp_path / "out" / "lone" / "report.json").is_file()

@@ -47,6 +47,12 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _finite(value):
+    """``value`` as a float, or None where there is none or it is not finite (no view registered: the residual is NaN,
+    which the row's JSON cannot hold)."""
+    return float(value) if value is not None and np.isfinite(value) else None
+
+
 def _rig_angles(cameras) -> dict:
     from ..eval.poses import rotation_angle_deg
 
@@ -104,7 +110,7 @@ def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
         result = fuse(capture, options.fuse, rig=options.rig)
         alignment = result.report["alignment"]
         row.update(status="done" if result.registered else "not_registered", reason=alignment.get("reason", ""),
-                   residual_px=alignment.get("residual_px"), focal_px=(alignment.get("focals_px") or [None])[0],
+                   residual_px=_finite(alignment.get("residual_px")), focal_px=_finite((alignment.get("focals_px") or [None])[0]),
                    views=len(capture), gaussians=None if result.gaussians is None else len(result.gaussians),
                    rig_angles_deg=_rig_angles(result.cameras))
         with atomic_dir(out / job.name, overwrite=options.force) as temporary:
