@@ -19,6 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_dir, atomic_path
 from ..errors import InputError
+from ..io.capture import to_jsonable
 from ..io.jobs import CaptureJob
 
 __all__ = ["BatchOptions", "FAILED", "ROW_FILE", "process_capture", "failure_path", "record_failure"]
@@ -45,12 +46,6 @@ def failure_path(out: Path, name: str) -> Path:
 
 def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def _finite(value):
-    """``value`` as a float, or None where there is none or it is not finite (no view registered: the residual is NaN,
-    which the row's JSON cannot hold)."""
-    return float(value) if value is not None and np.isfinite(value) else None
 
 
 def _rig_angles(cameras) -> dict:
@@ -109,10 +104,12 @@ def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
         capture = load_job(job)
         result = fuse(capture, options.fuse, rig=options.rig)
         alignment = result.report["alignment"]
-        row.update(status="done" if result.registered else "not_registered", reason=alignment.get("reason", ""),
-                   residual_px=_finite(alignment.get("residual_px")), focal_px=_finite((alignment.get("focals_px") or [None])[0]),
-                   views=len(capture), gaussians=None if result.gaussians is None else len(result.gaussians),
-                   rig_angles_deg=_rig_angles(result.cameras))
+        # As JSON holds them: where no view registered the residual is NaN, and the row's JSON has no NaN (null).
+        row.update(to_jsonable(dict(
+            status="done" if result.registered else "not_registered", reason=alignment.get("reason", ""),
+            residual_px=alignment.get("residual_px"), focal_px=(alignment.get("focals_px") or [None])[0],
+            views=len(capture), gaussians=None if result.gaussians is None else len(result.gaussians),
+            rig_angles_deg=_rig_angles(result.cameras)), "batch row"))
         with atomic_dir(out / job.name, overwrite=options.force) as temporary:
             write_reconstruction_files(result, temporary)
             _thumbnails(temporary, capture)
