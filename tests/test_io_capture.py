@@ -8,7 +8,7 @@ import pytest
 from fingersplat3d.io import (CameraSet, capture_files, depth_colormap, read_cameras, read_capture, read_depth,
                               read_image, read_minutiae, write_cameras, write_capture, write_depth,
                               write_depth_preview, write_minutiae)
-from fingersplat3d.io.capture import to_jsonable
+from fingersplat3d.io.jsonio import to_jsonable
 from fingersplat3d.scene import Camera, Capture, View, look_at
 
 H, W = 24, 32
@@ -197,8 +197,9 @@ def test_minutiae_round_trip_keeps_free_keys(tmp_path):
 def test_to_jsonable():
     assert to_jsonable({1: (np.float64(1.5), np.array([[1, 2]])), "p": float("inf")}) == {"1": [1.5, [[1, 2]]],
                                                                                             "p": None}
-    with pytest.raises(TypeError):
-        to_jsonable({"x": object()})
+    assert to_jsonable({"names": {"b", "a"}, "cut": frozenset({2, 1})}) == {"names": ["a", "b"], "cut": [1, 2]}
+    with pytest.raises(TypeError, match=r"metadata\.x\.y: cannot store a object"):
+        to_jsonable({"x": {"y": object()}})
 
 
 def test_read_image_round_trip_8_and_16_bit_files(tmp_path):

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_dir, atomic_path
 from ..errors import InputError
-from ..io.capture import to_jsonable
+from ..io.jsonio import to_jsonable
 from ..io.jobs import CaptureJob
 
 __all__ = ["BatchOptions", "FAILED", "ROW_FILE", "process_capture", "failure_path", "record_failure"]

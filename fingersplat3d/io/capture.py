@@ -26,11 +26,10 @@ write leaves nothing behind.
 from __future__ import annotations
 
 import json
-import math
 import re
 import shutil
 import warnings
-from dataclasses import asdict, dataclass, field, is_dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any, Mapping
 
@@ -43,12 +42,12 @@ from ..synth.rolled import ROLLED_PRINT_FILE
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
 from .images import IMAGE_SUFFIXES, read_image, read_mask, unread_photos_note, write_image, write_mask
-from .jsonio import read_json
+from .jsonio import read_json, to_jsonable
 from .minutiae import write_minutiae
 from .ply import write_mesh_ply
 
 __all__ = ["CAPTURE_FORMAT", "CAPTURE_VERSION", "CaptureFiles", "capture_files", "is_capture_folder",
-           "read_capture", "write_capture", "to_jsonable"]
+           "read_capture", "write_capture"]
 
 CAPTURE_FORMAT = "fingersplat3d-capture"
 CAPTURE_VERSION = 1
@@ -76,30 +75,6 @@ class CaptureFiles:
 
 def _natural_key(text: str) -> tuple:
     return tuple((0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", text))
-
-
-def to_jsonable(value: Any, where: str = "metadata") -> Any:
-    """Plain JSON values from numpy arrays/scalars, tuples, paths and dataclasses.
-
-    Non-finite floats become ``null`` (JSON has no NaN); anything else unknown is a ``TypeError``.
-    """
-    if isinstance(value, Mapping):
-        return {str(key): to_jsonable(item, f"{where}[{key!r}]") for key, item in value.items()}
-    if is_dataclass(value) and not isinstance(value, type):
-        return to_jsonable(asdict(value), where)
-    if isinstance(value, np.ndarray):
-        return to_jsonable(value.tolist(), where)
-    if isinstance(value, np.generic):
-        return to_jsonable(value.item(), where)
-    if isinstance(value, (list, tuple)):
-        return [to_jsonable(item, f"{where}[{index}]") for index, item in enumerate(value)]
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{where}: cannot store a {type(value).__name__} in JSON")
 
 
 def _foreign(data: Any) -> bool:

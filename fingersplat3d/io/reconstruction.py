@@ -7,11 +7,10 @@ Every file is written under a temporary name and moved into place when complete.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
@@ -20,6 +19,7 @@ from ..atomic import atomic_path
 from .cameras import UNITS
 from .depth import depth_colormap, write_depth, write_depth_preview
 from .images import write_image
+from .jsonio import to_jsonable
 from .ply import write_points_ply
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -142,32 +142,6 @@ def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int =
     return np.ascontiguousarray(np.concatenate([picture, panel], axis=1))
 
 
-def _jsonable(value: Any, where: str) -> Any:
-    """``value`` as plain JSON types: numpy scalars/arrays, paths, dataclasses, tuples and sets converted,
-    non-finite floats as ``null`` (strict JSON has no NaN)."""
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist(), where)
-    if isinstance(value, Path):
-        return str(value)
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return _jsonable({field.name: getattr(value, field.name) for field in dataclasses.fields(value)}, where)
-    if isinstance(value, dict):
-        return {str(key): _jsonable(item, f"{where}.{key}") for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(item, f"{where}[{index}]") for index, item in enumerate(value)]
-    if isinstance(value, (set, frozenset)):
-        return sorted(_jsonable(item, where) for item in value)
-    raise TypeError(f"report value at {where} has type {type(value).__name__}, which has no JSON form")
-
-
 def write_report(path: str | Path, report: dict) -> Path:
     """Write ``report.json``: sorted keys, indented, numpy-safe, NaN/Inf as null, atomically.
 
@@ -177,7 +151,7 @@ def write_report(path: str | Path, report: dict) -> Path:
     path = Path(path)
     if not isinstance(report, dict):
         raise TypeError(f"{path}: a report is a dict, got {type(report).__name__}")
-    text = json.dumps(_jsonable(report, "report"), sort_keys=True, indent=2, allow_nan=False) + "\n"
+    text = json.dumps(to_jsonable(report, "report"), sort_keys=True, indent=2, allow_nan=False) + "\n"
     with atomic_path(path) as temporary:
         temporary.write_text(text, encoding="utf-8")
     return path
