@@ -37,7 +37,9 @@ Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``uv_a [N, 2] -> (uv_b [N, 2], seen_in_b [N] bool)``."""
 
 PATCH_PERIODS = 2.5
-"""Patch half-size in ridge periods: enough curvature of the ridges to pin a position."""
+"""Patch half-size in ridge periods: enough curvature of the ridges to pin a position. Smaller ones (1.75) measured on
+every registration figure (docs/measurements.md, stops 71-72): the warp check and the held-out finger better, but the
+side cameras of a rig biased (synthetic rig self-calibration 0.25 -> 0.57 degrees) and chance peaks more frequent."""
 MIN_SCORE = 0.4
 """Correlation a match must reach."""
 MIN_UNIQUENESS = 0.03
@@ -169,14 +171,16 @@ def _region_warps(prediction: np.ndarray, jacobian: np.ndarray, centre: int) -> 
 
 
 def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, period: float, search: float, *, stride: float | None = None,
-                 min_score: float = MIN_SCORE, min_uniqueness: float = MIN_UNIQUENESS) -> GuidedMatches:
-    """Matches of a grid of ``a`` (every ``stride`` pixels, default one period) searched ``search`` px around the predictions.
+                 min_score: float = MIN_SCORE, min_uniqueness: float = MIN_UNIQUENESS,
+                 patch_periods: float = PATCH_PERIODS) -> GuidedMatches:
+    """Matches of a grid of ``a`` (every ``stride`` pixels, default one period) searched ``search`` px around the predictions,
+    with patches of half-size ``patch_periods`` ridge periods.
 
     ``maps_*`` hold the ridge textures (:func:`fingersplat3d.align.texture.ridge_texture`) and the
     finger masks; a point is tried when its patch lies on the finger in a and its
     prediction, seen by b, lies on the finger in b with a non-degenerate local map.
     """
-    half = max(3, int(round(PATCH_PERIODS * period)))
+    half = max(3, int(round(patch_periods * period)))
     search = max(1, int(round(search)))
     grid = _grid(maps_a, half, stride or period)
     if len(grid) == 0:
