@@ -5,7 +5,7 @@
 Each pair of a synthetic uwa capture (640x512) is matched through a predictor made of the *true* cameras and depth
 maps (:class:`~fingersplat3d.align.correspond.model_predictor.ModelPredictor`), so every match's offset from the true
 correspondence is the matcher's own error: its mean over the pair (a bias the global alignment cannot average away)
-and the median size of its component across and along the ridges. Prints a markdown table, one row per pair and
+and the median size of its component across the ridges. Prints a markdown table, one row per pair and
 patch size (seeds pooled: the mean offset of all matches, the medians of all matches).
 """
 from __future__ import annotations
@@ -20,18 +20,26 @@ from fingersplat3d.errors import run_script
 PAIRS = ((1, 0), (1, 2), (0, 2))  # uwa rig: left, center, right
 
 
-def pair_offsets(capture, a: int, b: int, patch_periods: float) -> np.ndarray:
-    """``[N, 3]`` per match of views ``a -> b``: offset in b's pixels (u, v) and its component across the ridges."""
-    from fingersplat3d.align.correspond.guided import RidgeMaps, match_guided
-    from fingersplat3d.align.correspond.model_predictor import OCCLUSION, ModelPredictor
+def ridge_maps(capture) -> tuple[float, list]:
+    """The capture's ridge period (from its centre view) and every view's ridge maps, made once for all its pairs."""
+    from fingersplat3d.align.correspond.guided import RidgeMaps
     from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 
-    view_a, view_b = capture.views[a], capture.views[b]
     period = estimate_ridge_period(capture.views[1].image, capture.views[1].mask)
+    return period, [RidgeMaps(ridge_texture(v.image, v.mask, period), v.mask) for v in capture.views]
+
+
+def pair_offsets(capture, maps: tuple[float, list], a: int, b: int, patch_periods: float) -> np.ndarray:
+    """``[N, 3]`` per match of views ``a -> b``: offset in b's pixels (u, v) and its component across the ridges;
+    ``maps``: :func:`ridge_maps` of the capture."""
+    from fingersplat3d.align.correspond.guided import match_guided
+    from fingersplat3d.align.correspond.model_predictor import OCCLUSION, ModelPredictor
+
+    view_a, view_b = capture.views[a], capture.views[b]
+    period, views = maps
     truth = ModelPredictor(view_a.camera, view_b.camera, view_a.depth, view_b.depth,
                            OCCLUSION * float(np.nanmedian(view_b.depth)))
-    maps = [RidgeMaps(ridge_texture(v.image, v.mask, period), v.mask) for v in (view_a, view_b)]
-    matches = match_guided(maps[0], maps[1], truth, period, 0.7 * period, patch_periods=patch_periods)
+    matches = match_guided(views[a], views[b], truth, period, 0.7 * period, patch_periods=patch_periods)
     offset = matches.uv_b - truth(matches.uv_a)[0]
     across = np.linalg.eigh(matches.information_b)[1][:, :, 1]  # the information's strongest direction
     return np.column_stack([offset, np.einsum("ni,ni->n", offset, across)])
@@ -56,10 +64,11 @@ def main() -> int:
         print("bench_guided_bias: --seeds must be at least 1 and --patch-periods positive numbers", file=sys.stderr)
         return 2
     captures = [synthesize(seed, SynthConfig(size=(640, 512))).capture for seed in range(args.seeds)]
+    maps = [ridge_maps(capture) for capture in captures]
     rows = []
     for a, b in tqdm(PAIRS, desc="pairs", unit="pair"):
         for size in sizes:
-            found = np.concatenate([pair_offsets(capture, a, b, size) for capture in captures])
+            found = np.concatenate([pair_offsets(capture, made, a, b, size) for capture, made in zip(captures, maps)])
             names = captures[0].names
             rows.append(f"| {names[a]} → {names[b]} | {size:g} | {len(found)} | {found[:, 0].mean():+.2f} / "
                         f"{found[:, 1].mean():+.2f} | {np.median(np.abs(found[:, 2])):.2f} |")
