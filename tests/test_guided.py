@@ -3,7 +3,8 @@ import cv2
 import numpy as np
 import pytest
 
-from fingersplat3d.align.correspond.guided import RidgeMaps, match_guided, predict_with_jacobian, structure_information
+from fingersplat3d.align.correspond.guided import (RidgeMaps, match_guided, predict_with_curvature, predict_with_jacobian,
+                                                 structure_information)
 from fingersplat3d.align.correspond.texture import estimate_ridge_period, ridge_texture
 
 LINEAR = np.array([[0.9, 0.15], [-0.1, 0.8]])
@@ -90,3 +91,49 @@ def test_larger_patches_find_fewer_chance_peaks(textures, uwa640):
                                patch_periods=patch_periods)
         shares.append(len(matches) / matches.tried)
     assert shares[1] < 0.75 * shares[0], shares
+
+
+def test_curvature_of_a_quadratic_predictor_is_its_second_derivative():
+    hessian_u = np.array([[0.002, -0.001], [-0.001, 0.0005]])
+    hessian_v = np.array([[-0.003, 0.0], [0.0, 0.001]])
+
+    def bent(uv):
+        return uv @ LINEAR.T + 0.5 * np.stack([np.einsum("ni,ij,nj->n", uv, h, uv) for h in (hessian_u, hessian_v)], 1), \
+            np.ones(len(uv), bool)
+
+    uv = np.array([[10.0, 20.0], [300.0, 100.0]])
+    np.testing.assert_allclose(predict_with_curvature(bent, uv, 12.0), np.broadcast_to(np.stack([hessian_u, hessian_v]), (2, 2, 2, 2)),
+                               atol=1e-9)
+    edge = lambda uv: (np.where(uv[:, :1] > 305.0, np.nan, bent(uv)[0]), np.ones(len(uv), bool))  # noqa: E731
+    curvature = predict_with_curvature(edge, uv, 12.0)  # the second point's stencil reaches past a's surface
+    assert np.isfinite(curvature).all() and curvature[0].any() and not curvature[1].any()
+
+
+RADIUS = 150.0  # the bend of the test below: b sees a's rows as on a cylinder of this radius (px) turned edge on
+
+
+def test_a_bent_map_is_matched_without_bias_through_its_curvature(textures):
+    """b is a's texture foreshortened across the finger as a cylinder's side is (rows ``v`` -> ``R sin(v / R)`` about
+    the middle): a patch's affine map alone misplaces its ridges there, on one side of the truth (the bias the
+    registration cannot average away); the local quadratic map does not (docs/measurements.md, stop 73)."""
+    texture, mask, _, _, period = textures
+    middle = (mask.shape[0] - 1) / 2.0
+    rows, cols = np.mgrid[0:mask.shape[0], 0:mask.shape[1]].astype(np.float32)
+    behind = middle + RADIUS * np.arcsin(np.clip((rows - middle) / RADIUS, -1.0, 1.0))  # b's pixel -> a's
+    bent_texture = cv2.remap(texture, cols, behind.astype(np.float32), cv2.INTER_LINEAR)
+    bent_mask = cv2.remap(mask.astype(np.uint8), cols, behind.astype(np.float32), cv2.INTER_NEAREST) > 0
+    bent_mask &= np.abs(rows - middle) < 0.9 * RADIUS
+
+    def predictor(uv):
+        angle = (uv[:, 1] - middle) / RADIUS
+        return np.stack([uv[:, 0], middle + RADIUS * np.sin(angle)], 1), np.abs(angle) < 1.1
+
+    bias = {}
+    for curvature in (False, True):
+        matches = match_guided(RidgeMaps(texture, mask), RidgeMaps(bent_texture, bent_mask), predictor, period,
+                               search=0.7 * period, curvature=curvature)
+        assert len(matches) > 100
+        offset = matches.uv_b - predictor(matches.uv_a)[0]
+        outward = np.sign(matches.uv_a[:, 1] - middle)  # the foreshortening grows away from the middle
+        bias[curvature] = float(np.mean(offset[:, 1] * outward))
+    assert abs(bias[True]) < 0.05 < 0.15 < abs(bias[False]), bias  # measured -0.001 and -0.24 px

@@ -62,9 +62,10 @@ def test_calibration_recovers_the_rig_better_than_single_captures(registered, ca
     errors = [rotation_angle_deg(rig.rotations[v], true_relative(captures[0], v)) for v in (1, 2)]
     single = [rotation_angle_deg(c.alignment.cam_to_world[0][:3, :3].T @ c.alignment.cam_to_world[v][:3, :3],
                                  true_relative(captures[0], v)) for c in pooled for v in (1, 2)]
-    # Measured 0.16-0.26 degrees over four sets of three seeds (0.57-0.79 with the joint fit on the matches alone,
-    # without the captures' silhouette contours: docs/measurements.md, "Rig self-calibration").
-    assert max(errors) < 0.5, errors
+    # Measured 0.09-0.14 degrees over three sets of three seeds since stop 73 (guided matching through the predictor's
+    # bend, contour targets on the outline; 0.23-0.32 before, 0.57-0.79 with the joint fit on the matches alone, without
+    # the captures' silhouette contours: docs/measurements.md, "Rig self-calibration" and stop 73).
+    assert max(errors) < 0.3, errors
     assert max(errors) <= max(single) + 0.2
     # Each camera its own focal (three captures): the generator's cameras share one, and none is invented apart from
     # it (measured within 2 % on three sets of three seeds, these 1.003-1.014; the real UWA rig's front camera fits
@@ -76,7 +77,9 @@ def test_calibration_recovers_the_rig_better_than_single_captures(registered, ca
 
 def test_a_capture_brings_the_silhouette_contours_its_own_fit_stood_on(registered):
     """Each registered capture pools, beside its matches, the contours its own last solve stood on: one-way pairs (a's
-    surface onto b's outline, no information on a's side), each onto a pixel inside b's silhouette."""
+    surface onto b's outline, no information on a's side), each onto b's outline: within a pixel of its edge."""
+    from scipy.ndimage import binary_dilation, binary_erosion
+
     captures, pooled = registered
     for capture, truth in zip(pooled, captures):
         assert len(capture.contours) >= 4
@@ -85,8 +88,9 @@ def test_a_capture_brings_the_silhouette_contours_its_own_fit_stood_on(registere
             assert not np.any(pair.information_a) and np.all(pair.weight > 0)
             mask = truth.views[pair.b].mask
             cols, rows = np.round(pair.uv_b).astype(int).T
-            inside = mask[np.clip(rows, 0, mask.shape[0] - 1), np.clip(cols, 0, mask.shape[1] - 1)]
-            assert inside.mean() > 0.9  # a pixel inside b's outermost mask pixel
+            rows, cols = np.clip(rows, 0, mask.shape[0] - 1), np.clip(cols, 0, mask.shape[1] - 1)
+            assert binary_dilation(mask, iterations=2)[rows, cols].mean() > 0.9  # not beyond the outline
+            assert not binary_erosion(mask, iterations=2)[rows, cols].any()  # nor inside it
 
 
 def test_a_capture_aligned_on_a_fixed_rig_keeps_its_poses(registered, tmp_path):

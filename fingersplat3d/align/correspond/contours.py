@@ -99,9 +99,10 @@ def contour_correspondences(alignment, masks, a: int, b: int, period_px: float, 
         return empty
     chosen, side = chosen[keep], np.asarray(sides)[chosen_sides[keep]]
     half_at, centre_at = frame.sections.at(s[chosen])
-    # One pixel inside the outermost mask pixel: where b's own pointmap still has depth (the correspondence needs it;
-    # the residual is a -> b only), at most a pixel short of the true outline.
+    # On the outline itself (the outer side of the outermost mask pixel). One pixel inside it, where b's own pointmap
+    # still had depth, set every target a pixel short, all the same way: synthetic side cameras 0.7-1.0 degrees off
+    # with exact matches (0.04-0.14 without the contours; docs/measurements.md, stop 73).
     station_points = (frame.origin + s[chosen][:, None] * frame.axis
-                      + (centre_at + side * (half_at - 1.0))[:, None] * frame.normal)
+                      + (centre_at + side * half_at)[:, None] * frame.normal)
     normal_image = side[:, None] * frame.normal
     return uv_a[chosen], station_points, np.einsum("ni,nj->nij", normal_image, normal_image)

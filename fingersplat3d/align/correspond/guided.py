@@ -3,9 +3,12 @@
 A *predictor* maps pixels of view a to where view b should see them (through cylinder charts in
 the first round, through the current 3D model afterwards) and says whether b sees them. For each
 grid point of a, the patch of b around the prediction is resampled into a's frame with the
-predictor's local affine map (its Jacobian), which undoes the foreshortening between the views,
-and a's patch is slid over it (normalised cross-correlation); the peak, refined to sub-pixel by a
-parabola, is the match. So the search only has to cover the predictor's error, not the whole
+predictor's local quadratic map (its Jacobian and its bend over the patch), which undoes the
+foreshortening between the views, and a's patch is slid over it (normalised cross-correlation);
+the peak, refined to sub-pixel by a parabola, is the match. The bend matters on a finger: the
+foreshortening grows across a patch towards the silhouette, and an affine map alone sets the
+ridges of side views' patches 0.8-1.6 px off across the finger, all the same way (a bias the
+global alignment cannot average away; with the bend 0.0-0.2 px, docs/measurements.md, stop 73). So the search only has to cover the predictor's error, not the whole
 image, and a repeating ridge pattern is not confused with its neighbour when that error is below
 half a ridge period.
 
@@ -31,15 +34,17 @@ from ...device import cpu_threads, per_item
 from ...segment.morphology import eroded
 from .texture import structure_products
 
-__all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_jacobian", "match_guided", "structure_information"]
+__all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_curvature", "predict_with_jacobian", "match_guided",
+           "structure_information"]
 
 Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``uv_a [N, 2] -> (uv_b [N, 2], seen_in_b [N] bool)``."""
 
 PATCH_PERIODS = 2.5
 """Patch half-size in ridge periods: enough curvature of the ridges to pin a position. Smaller ones (1.75) measured on
-every registration figure (docs/measurements.md, stops 71-72): the warp check and the held-out finger better, but the
-side cameras of a rig biased (synthetic rig self-calibration 0.25 -> 0.57 degrees) and chance peaks more frequent."""
+every registration figure at stops 71-72 (docs/measurements.md), with the affine patch warp of then: the warp check and
+the held-out finger better, the rig's side cameras worse, because the smaller patches' smaller warp bias no longer
+offset the contour targets' one-pixel inset (both gone at stop 73); chance peaks more frequent."""
 MIN_SCORE = 0.4
 """Correlation a match must reach."""
 MIN_UNIQUENESS = 0.03
@@ -145,14 +150,13 @@ def _parabola(left, centre, right) -> float:
     return float(min(max(0.5 * (left - right) / denominator, -0.5), 0.5)) if denominator < 0 else 0.0
 
 
-def _match_one(texture_a, texture_b, point, warp, half, search, exclusion):
+def _match_one(texture_a, texture_b, point, coefficients, basis, half, search, exclusion):
     """``(offset_u, offset_v, score, uniqueness)`` of one grid point: the peak's offset from the prediction in a's frame
-    (NaN when the correlation surface is empty); ``warp``: the 2x3 map showing b in a's frame (:func:`_region_warps`)."""
+    (NaN when the correlation surface is empty); b's region is resampled in a's frame through the predictor's local
+    quadratic map (:func:`_region`)."""
     size = 2 * half + 1
     template = cv2.getRectSubPix(texture_a, (size, size), (float(point[0]), float(point[1])))
-    reach = 2 * (half + search) + 1
-    region = cv2.warpAffine(texture_b, warp, (reach, reach), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    region = _region(texture_b, coefficients, basis)
     score = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
     _, best, _, (px, py) = cv2.minMaxLoc(score)
     if not math.isfinite(best):
@@ -164,21 +168,56 @@ def _match_one(texture_a, texture_b, point, warp, half, search, exclusion):
     return px + dx - search, py + dy - search, float(best), float(best - others.max())
 
 
-def _region_warps(prediction: np.ndarray, jacobian: np.ndarray, centre: int) -> np.ndarray:
-    """``[N, 2, 3]`` affine maps whose output pixel ``x`` shows b at ``prediction + J (x - centre)`` (b resampled in a's
-    frame around each prediction), made for all points at once."""
-    return np.concatenate([jacobian, (prediction - jacobian @ np.array([centre, centre], np.float64))[:, :, None]], 2)
+def _monomials(d: np.ndarray) -> np.ndarray:
+    """``[..., 6]`` the terms ``1, du, dv, du^2 / 2, du dv, dv^2 / 2`` of offsets ``d [..., 2]``: a local quadratic map is
+    these times its :func:`_coefficients`."""
+    du, dv = d[..., 0], d[..., 1]
+    return np.stack([np.ones_like(du), du, dv, 0.5 * du * du, du * dv, 0.5 * dv * dv], -1)
+
+
+def _coefficients(prediction: np.ndarray, jacobian: np.ndarray, hessian: np.ndarray) -> np.ndarray:
+    """``[N, 6, 2]`` the maps ``prediction + J d + d^T H d / 2`` (``hessian [N, 2, 2, 2]``, one symmetric matrix per
+    coordinate of b) as coefficients of :func:`_monomials`."""
+    return np.stack([prediction, jacobian[:, :, 0], jacobian[:, :, 1], hessian[:, :, 0, 0], hessian[:, :, 0, 1],
+                     hessian[:, :, 1, 1]], 1)
+
+
+def _region(texture_b: np.ndarray, coefficients: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """b's texture resampled through a point's local map (``coefficients [6, 2]``) at the region's offsets (``basis
+    [R, R, 6]``, their :func:`_monomials` in float32): the region around the prediction seen in a's frame. One small
+    product and a remap (a tenth of a millisecond, as an affine warp; the map as one einsum cost 2 ms)."""
+    where = basis @ coefficients.astype(np.float32)
+    return cv2.remap(texture_b, where[..., 0], where[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+def predict_with_curvature(predictor: Predictor, uv: np.ndarray, reach: float) -> np.ndarray:
+    """``[N, 2, 2, 2]`` second derivatives of the predictor at ``uv`` (per coordinate of b), from its values ``reach``
+    pixels around each point (a patch's scale: the bend the patch sees, not the local one); zero where any of those is
+    not finite (near the edge of a's surface), which leaves the affine map."""
+    uv = np.asarray(uv, np.float64)
+    value = {}
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            value[du, dv] = predictor(uv + reach * np.array([du, dv], np.float64))[0]
+    uu = (value[1, 0] - 2.0 * value[0, 0] + value[-1, 0]) / reach**2
+    vv = (value[0, 1] - 2.0 * value[0, 0] + value[0, -1]) / reach**2
+    uv_ = (value[1, 1] - value[1, -1] - value[-1, 1] + value[-1, -1]) / (4.0 * reach**2)
+    hessian = np.stack([np.stack([uu, uv_], -1), np.stack([uv_, vv], -1)], -1)  # [N, 2(k), 2, 2]
+    finite = np.isfinite(hessian).all((1, 2, 3))
+    hessian[~finite] = 0.0
+    return hessian
 
 
 def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, period: float, search: float, *, stride: float | None = None,
                  min_score: float = MIN_SCORE, min_uniqueness: float = MIN_UNIQUENESS,
-                 patch_periods: float = PATCH_PERIODS) -> GuidedMatches:
+                 patch_periods: float = PATCH_PERIODS, curvature: bool = True) -> GuidedMatches:
     """Matches of a grid of ``a`` (every ``stride`` pixels, default one period) searched ``search`` px around the predictions,
     with patches of half-size ``patch_periods`` ridge periods.
 
     ``maps_*`` hold the ridge textures (:func:`fingersplat3d.align.texture.ridge_texture`) and the
     finger masks; a point is tried when its patch lies on the finger in a and its
-    prediction, seen by b, lies on the finger in b with a non-degenerate local map.
+    prediction, seen by b, lies on the finger in b with a non-degenerate local map. ``curvature=False`` resamples b
+    through the predictor's affine map alone (before stop 73; kept for tools/bench_guided_bias.py).
     """
     half = max(3, int(round(patch_periods * period)))
     search = max(1, int(round(search)))
@@ -200,15 +239,19 @@ def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, per
     threads = cpu_threads()
     chunks = np.array_split(index, min(len(index), 4 * threads)) if len(index) else []
 
-    warps = np.zeros((len(grid), 2, 3))
-    warps[index] = _region_warps(prediction[index], jacobian[index], half + search)
+    hessian = np.zeros((len(grid), 2, 2, 2))
+    if curvature and len(index):
+        hessian[index] = predict_with_curvature(predictor, grid[index], 0.5 * half)
+    coefficients = _coefficients(prediction, jacobian, hessian)
+    steps = np.arange(-(half + search), half + search + 1, dtype=np.float64)
+    basis = _monomials(np.stack(np.meshgrid(steps, steps), -1)).astype(np.float32)  # [R, R, 6], (u, v) from the point
 
     def chunk(points: np.ndarray) -> list:
-        return [_match_one(texture_a, texture_b, grid[i], warps[i], half, search, exclusion) for i in points]
+        return [_match_one(texture_a, texture_b, grid[i], coefficients[i], basis, half, search, exclusion) for i in points]
 
     results = np.array([r for part in per_item(chunk, chunks) for r in part], np.float64).reshape(-1, 4)
-    # Each peak carried from a's frame into b's by the point's own local map (its matmul, as one stacked product).
-    uv_b = prediction[index] + (jacobian[index] @ results[:, :2, None])[:, :, 0]
+    # Each peak carried from a's frame into b's by the point's own local map.
+    uv_b = (_monomials(results[:, :2])[:, None, :] @ coefficients[index])[:, 0]
     score, uniqueness = results[:, 2], results[:, 3]
     keep = np.isfinite(uv_b).all(1) & (score >= min_score) & (uniqueness >= min_uniqueness)
     uv_a, uv_b, score, J = grid[index][keep], uv_b[keep], score[keep], jacobian[index][keep]

@@ -210,6 +210,10 @@ def _correspondences(depths: Sequence[np.ndarray], pairs: Sequence[PairCorrespon
         if not (used[pair.a] and used[pair.b]) or len(pair.weight) == 0:
             continue
         z_a, z_b = sample_bilinear(depths[pair.a], pair.uv_a), sample_bilinear(depths[pair.b], pair.uv_b)
+        if pair.information_a is not None and not np.any(pair.information_a):
+            # One-way rows (a's surface onto b's outline): b's end is weighed by nothing, and its target lies on b's
+            # silhouette, where b's pointmap may have no depth: any finite depth serves.
+            z_b = np.where(np.isfinite(z_b), z_b, median_depth(depths[pair.b]))
         keep = np.isfinite(z_a) & np.isfinite(z_b) & (np.asarray(pair.weight) > 0)
         if not keep.any():
             continue
