@@ -5,12 +5,12 @@ the first round, through the current 3D model afterwards) and says whether b see
 grid point of a, the patch of b around the prediction is resampled into a's frame with the
 predictor's local quadratic map (its Jacobian and its bend over the patch), which undoes the
 foreshortening between the views, and a's patch is slid over it (normalised cross-correlation);
-the peak, refined to sub-pixel by a parabola, is the match. The bend matters on a finger: the
-foreshortening grows across a patch towards the silhouette, and an affine map alone sets the
-ridges of side views' patches 0.8-1.6 px off across the finger, all the same way (a bias the
-global alignment cannot average away; with the bend 0.0-0.2 px, docs/measurements.md, stop 73). So the search only has to cover the predictor's error, not the whole
-image, and a repeating ridge pattern is not confused with its neighbour when that error is below
-half a ridge period.
+the peak, refined to sub-pixel by a parabola, is the match. So the search only has to cover the
+predictor's error, not the whole image, and a repeating ridge pattern is not confused with its
+neighbour when that error is below half a ridge period. The bend matters on a finger: the
+foreshortening grows across a patch towards the silhouette, and an affine map alone set side
+views' matches 0.8-1.6 px off across the finger, all the same way (a bias the global alignment
+cannot average away; with the bend 0.0-0.3 px; docs/measurements.md, stop 73).
 
 Ridge texture is nearly one-dimensional over a few periods: a patch pins the position *across*
 the ridges to a fraction of a pixel and *along* them hardly at all (measured on synthetic
@@ -185,7 +185,7 @@ def _coefficients(prediction: np.ndarray, jacobian: np.ndarray, hessian: np.ndar
 def _region(texture_b: np.ndarray, coefficients: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """b's texture resampled through a point's local map (``coefficients [6, 2]``) at the region's offsets (``basis
     [R, R, 6]``, their :func:`_monomials` in float32): the region around the prediction seen in a's frame. One small
-    product and a remap (a tenth of a millisecond, as an affine warp; the map as one einsum cost 2 ms)."""
+    product and a remap: 0.16 ms a point (an affine warp 0.10 ms; the map as one einsum cost 2 ms)."""
     where = basis @ coefficients.astype(np.float32)
     return cv2.remap(texture_b, where[..., 0], where[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
