@@ -20,10 +20,14 @@ def _truth():
     return views, alignment
 
 
-def _across_error(views, a, b, uv_a, uv_b, information):
-    camera_a, camera_b = views[a].camera, views[b].camera
+def _in_b(views, a, b, uv_a):
+    """Where view b sees view a's pixels ``uv_a`` on a's own depth (nearest pixel)."""
     depth = views[a].depth[np.rint(uv_a[:, 1]).astype(int), np.rint(uv_a[:, 0]).astype(int)]
-    projected, _ = camera_b.project(camera_a.unproject(uv_a, depth))
+    return views[b].camera.project(views[a].camera.unproject(uv_a, depth))[0]
+
+
+def _across_error(views, a, b, uv_a, uv_b, information):
+    projected = _in_b(views, a, b, uv_a)
     normal = np.array([np.linalg.eigh(i)[1][:, -1] for i in information])
     return np.abs(np.einsum("ni,ni->n", projected - uv_b, normal))
 
@@ -52,8 +56,7 @@ def test_on_the_true_model_the_targets_sit_on_the_outline_not_inside_it():
     masks = [v.mask for v in views]
     for a, b in ((0, 1), (2, 1), (1, 0), (1, 2), (0, 2), (2, 0)):
         uv_a, uv_b, _ = contour_correspondences(alignment, masks, a, b, period_px=8.0)
-        depth = views[a].depth[np.rint(uv_a[:, 1]).astype(int), np.rint(uv_a[:, 0]).astype(int)]
-        projected, _ = views[b].camera.project(views[a].camera.unproject(uv_a, depth))
+        projected = _in_b(views, a, b, uv_a)
         frame = silhouette_frame(masks[b])
         stations, t = frame.coordinates(uv_b)
         outward = np.sign(t - frame.sections.at(stations)[1])[:, None] * frame.normal

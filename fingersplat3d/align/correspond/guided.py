@@ -190,15 +190,20 @@ def _region(texture_b: np.ndarray, coefficients: np.ndarray, basis: np.ndarray) 
     return cv2.remap(texture_b, where[..., 0], where[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
-def predict_with_curvature(predictor: Predictor, uv: np.ndarray, reach: float) -> np.ndarray:
+def predict_with_curvature(predictor: Predictor, uv: np.ndarray, reach: float,
+                           centre: np.ndarray | None = None) -> np.ndarray:
     """``[N, 2, 2, 2]`` second derivatives of the predictor at ``uv`` (per coordinate of b), from its values ``reach``
     pixels around each point (a patch's scale: the bend the patch sees, not the local one); zero where any of those is
-    not finite (near the edge of a's surface), which leaves the affine map."""
+    not finite (near the edge of a's surface), which leaves the affine map. ``centre``: the predictions at ``uv``
+    themselves, when the caller holds them."""
     uv = np.asarray(uv, np.float64)
     value = {}
     for du in (-1, 0, 1):
         for dv in (-1, 0, 1):
-            value[du, dv] = predictor(uv + reach * np.array([du, dv], np.float64))[0]
+            if (du, dv) == (0, 0) and centre is not None:
+                value[du, dv] = np.asarray(centre, np.float64)
+            else:
+                value[du, dv] = predictor(uv + reach * np.array([du, dv], np.float64))[0]
     uu = (value[1, 0] - 2.0 * value[0, 0] + value[-1, 0]) / reach**2
     vv = (value[0, 1] - 2.0 * value[0, 0] + value[0, -1]) / reach**2
     uv_ = (value[1, 1] - value[1, -1] - value[-1, 1] + value[-1, -1]) / (4.0 * reach**2)
@@ -241,7 +246,7 @@ def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, per
 
     hessian = np.zeros((len(grid), 2, 2, 2))
     if curvature and len(index):
-        hessian[index] = predict_with_curvature(predictor, grid[index], 0.5 * half)
+        hessian[index] = predict_with_curvature(predictor, grid[index], 0.5 * half, prediction[index])
     coefficients = _coefficients(prediction, jacobian, hessian)
     steps = np.arange(-(half + search), half + search + 1, dtype=np.float64)
     basis = _monomials(np.stack(np.meshgrid(steps, steps), -1)).astype(np.float32)  # [R, R, 6], (u, v) from the point
