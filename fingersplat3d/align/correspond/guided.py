@@ -10,7 +10,7 @@ predictor's error, not the whole image, and a repeating ridge pattern is not con
 neighbour when that error is below half a ridge period. The bend matters on a finger: the
 foreshortening grows across a patch towards the silhouette, and an affine map alone set side
 views' matches 0.8-1.6 px off across the finger, all the same way (a bias the global alignment
-cannot average away; with the bend 0.0-0.3 px; docs/measurements.md, stop 73).
+cannot average away; with the bend 0.0-0.2 px; docs/measurements.md, stop 73).
 
 Ridge texture is nearly one-dimensional over a few periods: a patch pins the position *across*
 the ridges to a fraction of a pixel and *along* them hardly at all (measured on synthetic
