@@ -318,6 +318,7 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
                                       period_px=period_px, redraw=_redraw(capture, config))
         report["pairs"] = registration.pairs + identical
         report["registration"] = {"ridge_period_px": round(registration.period_px, 2), "guided_rounds": registration.rounds,
+                                  "turn_changes_deg": registration.turn_changes_deg,
                                   "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)},
                                   "photometric": registration.photometric,
                                   "pointmaps_redrawn_at_px": registration.redrawn_at_px}

@@ -28,6 +28,49 @@ def test_three_synthetic_views_register_within_a_few_degrees(uwa640):
     assert result.pairs[1]["matches"][-1] >= 0.9 * result.pairs[1]["matches"][0]
     # One finger's views agree through the model at most of the points it puts on both (measured 0.47-1.0).
     assert all(len(record["agreement"]) == 2 and min(record["agreement"]) > 0.3 for record in result.pairs)
+    # Three views settle in two rounds (the second turns no pair by more than a few hundredths of a degree): no more.
+    assert len(result.turn_changes_deg) == 2 and result.turn_changes_deg[-1] <= RegistrationConfig().settled_turn_deg
+
+
+def test_with_the_focal_held_guided_rounds_go_on_until_the_turns_settle(uwa640):
+    """With the focal held, another round after ``guided_rounds`` while the last one turned some pair by more than
+    ``settled_turn_deg``, never past ``guided_rounds + extra_rounds``; with a fitted focal two rounds are an early stop
+    (more carried ill-determined turns further off: docs/measurements.md, stop 74)."""
+    from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
+
+    views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; this pair's second round turns it by ~0.04 degrees
+    held = GlobalAlignConfig(optimize_focal=False)
+    config = RegistrationConfig(global_align=held)
+    settled = _register(views, config)
+    assert len(settled.turn_changes_deg) == settled.rounds >= config.guided_rounds
+    assert settled.turn_changes_deg[-1] <= config.settled_turn_deg or settled.rounds == config.guided_rounds + config.extra_rounds
+    never = _register(views, RegistrationConfig(global_align=held, settled_turn_deg=0.0, extra_rounds=2))
+    assert never.rounds == config.guided_rounds + 2 and len(never.turn_changes_deg) == never.rounds
+    fitted = _register(views, RegistrationConfig(settled_turn_deg=0.0))
+    assert fitted.rounds == config.guided_rounds and fitted.turn_changes_deg[-1] > 0.0
+
+
+def test_the_turn_change_between_two_alignments_is_the_largest_pair_rotation():
+    from scipy.spatial.transform import Rotation
+
+    from fingersplat3d.align.register import turn_change_deg
+    from fingersplat3d.align.solve.global_opt import GlobalAlignment
+
+    def alignment(poses, aligned):
+        return GlobalAlignment(poses, [1000.0] * 3, [np.ones((4, 4))] * 3, [1.0] * 3, [1.0] * 3, 0.3, 0.01, [(0, 1), (0, 2)],
+                               aligned, 0)
+
+    turned = np.eye(4)
+    turned[:3, :3] = Rotation.from_rotvec(np.radians([0.0, 1.5, 0.0])).as_matrix()
+    both = np.eye(4)
+    both[:3, :3] = Rotation.from_rotvec(np.radians([20.0, 0.0, 0.0])).as_matrix()
+    old = alignment([np.eye(4), np.eye(4), np.eye(4)], [True, True, True])
+    assert turn_change_deg(old, old) == 0.0
+    assert np.isclose(turn_change_deg(old, alignment([np.eye(4), turned, np.eye(4)], [True, True, True])), 1.5)
+    # A rotation of the whole capture turns no pair; a view not aligned in both is left out.
+    assert np.isclose(turn_change_deg(old, alignment([both, both, both], [True, True, True])), 0.0, atol=1e-6)
+    assert turn_change_deg(old, alignment([np.eye(4), turned, np.eye(4)], [True, False, True])) == 0.0
+    assert turn_change_deg(old, alignment([np.eye(4), np.eye(4), np.eye(4)], [True, False, False])) == 0.0
 
 
 def test_without_guided_rounds_the_first_alignment_is_rougher(uwa640):

@@ -94,6 +94,16 @@ class RegistrationConfig:
     matcher of :mod:`fingersplat3d.align.correspond.features` (``minutiae``, ``sift``, ``rootsift``, ``akaze``)."""
     guided_rounds: int = 2
     """Rounds of model-guided matching and refinement after the first alignment (0 = none)."""
+    extra_rounds: int = 4
+    """With the focal held (``--focal-px``, EXIF, a rig), rounds beyond ``guided_rounds``, one at a time, while the last
+    round still turned some pair of views by more than ``settled_turn_deg``: a pair 90 degrees apart shares a narrow
+    strip of skin and settles slowly (synthetic, second round 1.2-2.8 degrees). Measured (docs/measurements.md, stop
+    74): real pairs alone with the focal given, front-side 2.34 -> 1.07 degrees and the side views 90 degrees apart
+    8.0 -> 3.5 (median); three views within noise; three synthetic views settle in two rounds. Not with a fitted focal:
+    where the photos do not fix it (two views, crops without a tip) more rounds carry the turn along what they leave free
+    (CFPose two views 3.4 -> 4.6 degrees, real crops 2.9 / 3.8 -> 4.0 / 4.4), so two rounds are an early stop there."""
+    settled_turn_deg: float = 0.25
+    """A round that turns no pair of views by more than this (degrees) ends the extra rounds."""
     first_search: float = 2.0
     """Search radius of the first guided matching through the charts, in ridge periods."""
     grow_first_guess: bool = True
@@ -211,6 +221,9 @@ class Registration:
     """The pointmaps the final alignment stands on (redrawn at the fitted focal, or the ones given)."""
     redrawn_at_px: float | None = None
     """The focal the pointmaps were redrawn at (working pixels); None when they were not."""
+    turn_changes_deg: list[float] = field(default_factory=list)
+    """Each guided round's largest change of a view pair's turn (degrees): the rounds go on past ``guided_rounds``
+    while it is above ``RegistrationConfig.settled_turn_deg``."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -285,6 +298,22 @@ def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: Reg
     grown, _ = grow_first_guess(chart, first, match, lambda m: _verified(m, prepared.period, config), config.min_matches,
                                 0.1 * prepared.period)
     return grown
+
+
+def turn_change_deg(old: GlobalAlignment, new: GlobalAlignment) -> float:
+    """The largest angle (degrees) by which the relative rotation of two views aligned in both ``old`` and ``new``
+    changed between them; 0 with fewer than two such views."""
+    import torch
+
+    from ..rotations import rotation_angle
+
+    both = [v for v in range(len(new.aligned)) if old.aligned[v] and new.aligned[v]]
+    if len(both) < 2:
+        return 0.0
+    rotations = [torch.as_tensor(np.stack([np.asarray(al.world_to_cam[v])[:3, :3] for v in both]), dtype=torch.float64)
+                 for al in (old, new)]
+    relative = [r[None, :] @ r[:, None].transpose(-1, -2) for r in rotations]  # [b, a]: view b from view a
+    return float(np.degrees(rotation_angle(relative[0], relative[1]).max().item()))
 
 
 def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: int,
@@ -440,10 +469,13 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan
     fitted = registered
     rounds = 0
+    settle: list[float] = []  # each guided round's largest change of a pair's turn, degrees
     cap = config.many_views_matches if n_views >= config.many_views else 0  # each pair's matches in the alignment
     check_weak = (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
                   and config.weak_agreement_share > 0)  # once, after the first round
-    while rounds < (config.guided_rounds if registered else 0):
+    limit = config.guided_rounds if registered else 0
+    held = rig is not None or not config.global_align.optimize_focal  # the focal held: more rounds until the turns settle
+    while rounds < limit:
         rounds += 1
         refined, disagreed, agreements = [], set(), {}
         for a, b in pairs:
@@ -486,10 +518,15 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             break
         contours = _contours(alignment, prepared, config, on_rig=rig is not None)
         say(f"global alignment, round {rounds}")
+        before = alignment
         alignment = align(depths, focals, refined, config.global_align, previous=alignment, min_turns=min_turns,
                           contours=contours)
         solved_with = (refined + contours, min_turns)
         fitted = refined
+        moved = turn_change_deg(before, alignment)
+        settle.append(round(moved, 3))
+        if held and rounds == limit and moved > config.settled_turn_deg and limit < config.guided_rounds + config.extra_rounds:
+            limit += 1
     redrawn_at = None
     if redraw is not None and rig is None and fitted:
         redrawn = _redrawn(alignment, depths, focals, solved_with, redraw, config)
@@ -521,7 +558,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
                                                                                 solved_config, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
-                        photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours)
+                        photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours,
+                        turn_changes_deg=settle)
 
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
