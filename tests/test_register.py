@@ -32,10 +32,10 @@ def test_three_synthetic_views_register_within_a_few_degrees(uwa640):
     assert len(result.turn_changes_deg) == 2 and result.turn_changes_deg[-1] <= RegistrationConfig().settled_turn_deg
 
 
-def test_with_the_focal_held_guided_rounds_go_on_until_the_turns_settle(uwa640):
-    """With the focal held, another round after ``guided_rounds`` while the last one turned some pair by more than
-    ``settled_turn_deg``, never past ``guided_rounds + extra_rounds``; with a fitted focal two rounds are an early stop
-    (more carried ill-determined turns further off: docs/measurements.md, stop 74)."""
+def test_two_views_with_the_focal_held_take_rounds_until_their_turn_settles(uwa640):
+    """Two views with the focal held: another round after ``guided_rounds`` while the last one turned them by more than
+    ``settled_turn_deg``, never past ``guided_rounds + extra_rounds``. With a fitted focal two rounds are an early stop
+    (more carried ill-determined turns further off), and three views keep two rounds (docs/measurements.md, stop 74)."""
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
 
     views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; this pair's second round turns it by ~0.04 degrees
@@ -48,6 +48,8 @@ def test_with_the_focal_held_guided_rounds_go_on_until_the_turns_settle(uwa640):
     assert never.rounds == config.guided_rounds + 2 and len(never.turn_changes_deg) == never.rounds
     fitted = _register(views, RegistrationConfig(settled_turn_deg=0.0))
     assert fitted.rounds == config.guided_rounds and fitted.turn_changes_deg[-1] > 0.0
+    three = _register(uwa640.views, RegistrationConfig(global_align=held, settled_turn_deg=0.0))
+    assert three.rounds == config.guided_rounds and all(three.alignment.aligned)
 
 
 def test_the_turn_change_between_two_alignments_is_the_largest_pair_rotation():

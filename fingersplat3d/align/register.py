@@ -95,13 +95,15 @@ class RegistrationConfig:
     guided_rounds: int = 2
     """Rounds of model-guided matching and refinement after the first alignment (0 = none)."""
     extra_rounds: int = 4
-    """With the focal held (``--focal-px``, EXIF, a rig), rounds beyond ``guided_rounds``, one at a time, while the last
-    round still turned some pair of views by more than ``settled_turn_deg``: a pair 90 degrees apart shares a narrow
-    strip of skin and settles slowly (synthetic, second round 1.2-2.8 degrees). Measured (docs/measurements.md, stop
-    74): real pairs alone with the focal given, front-side 2.34 -> 1.07 degrees and the side views 90 degrees apart
-    8.0 -> 3.5 (median); three views within noise; three synthetic views settle in two rounds. Not with a fitted focal:
-    where the photos do not fix it (two views, crops without a tip) more rounds carry the turn along what they leave free
-    (CFPose two views 3.4 -> 4.6 degrees, real crops 2.9 / 3.8 -> 4.0 / 4.4), so two rounds are an early stop there."""
+    """Two views with the focal held (``--focal-px``, EXIF): rounds beyond ``guided_rounds``, one at a time, while the
+    last round still turned them by more than ``settled_turn_deg``. One pair alone settles slowly where it shares a
+    narrow strip of skin (synthetic 90-degree pairs: the second round turned them 1.2-2.8 degrees). Measured
+    (docs/measurements.md, stop 74): real pairs with the focal given, 45 degrees apart 2.34 -> 1.07 degrees and 90 degrees
+    apart 8.0 -> 3.5 (median). Not for three views or more: their loop of pairs holds the turns, and the rounds changed the
+    real rig's figures within noise (0.70 / 0.77 / 0.58 -> 0.60 / 0.77 / 0.60 degrees) for a median fuse 21 -> 31 s. Not
+    with a fitted focal: where the photos do not fix it (two views, crops without a tip) more rounds carried the turn along
+    what they leave free (CFPose two views 3.4 -> 4.6 degrees, real crops 2.9 / 3.8 -> 4.0 / 4.4), so two rounds are an
+    early stop there."""
     settled_turn_deg: float = 0.25
     """A round that turns no pair of views by more than this (degrees) ends the extra rounds."""
     first_search: float = 2.0
@@ -222,8 +224,8 @@ class Registration:
     redrawn_at_px: float | None = None
     """The focal the pointmaps were redrawn at (working pixels); None when they were not."""
     turn_changes_deg: list[float] = field(default_factory=list)
-    """Each guided round's largest change of a view pair's turn (degrees): the rounds go on past ``guided_rounds``
-    while it is above ``RegistrationConfig.settled_turn_deg``."""
+    """Each guided round's largest change of a view pair's turn (degrees): for two views with the focal held, the rounds
+    go on past ``guided_rounds`` while it is above ``RegistrationConfig.settled_turn_deg``."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -474,7 +476,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     check_weak = (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
                   and config.weak_agreement_share > 0)  # once, after the first round
     limit = config.guided_rounds if registered else 0
-    held = rig is not None or not config.global_align.optimize_focal  # the focal held: more rounds until the turns settle
+    # Two views with the focal held: more rounds until their turn settles (RegistrationConfig.extra_rounds).
+    settling = rig is None and not config.global_align.optimize_focal
     while rounds < limit:
         rounds += 1
         refined, disagreed, agreements = [], set(), {}
@@ -525,7 +528,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         fitted = refined
         moved = turn_change_deg(before, alignment)
         settle.append(round(moved, 3))
-        if held and rounds == limit and moved > config.settled_turn_deg and limit < config.guided_rounds + config.extra_rounds:
+        if (settling and sum(alignment.aligned) == 2 and rounds == limit and moved > config.settled_turn_deg
+                and limit < config.guided_rounds + config.extra_rounds):
             limit += 1
     redrawn_at = None
     if redraw is not None and rig is None and fitted:

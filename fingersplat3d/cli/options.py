@@ -18,7 +18,7 @@ def add_registration_arguments(parser) -> None:
                              "charts, then guided matching), or a classic matcher: minutiae, sift, rootsift, akaze")
     parser.add_argument("--guided-rounds", type=STEPS, default=RegistrationConfig.guided_rounds,
                         help=f"rounds of matching guided by the 3D model after the first alignment (default {RegistrationConfig.guided_rounds}; "
-                             f"with the focal held, up to {RegistrationConfig.extra_rounds} more while the turns still move)")
+                             f"two views with the focal held: up to {RegistrationConfig.extra_rounds} more while their turn still moves)")
     parser.add_argument("--photometric", action="store_true",
                         help="after the guided rounds, refine each view's surface densely on the ridge texture every other "
                              "view sees (~2 s; brings the views' ridges into phase, for texturing and prints; it does not "
