@@ -28,7 +28,7 @@ def test_three_synthetic_views_register_within_a_few_degrees(uwa640):
     assert result.pairs[1]["matches"][-1] >= 0.9 * result.pairs[1]["matches"][0]
     # One finger's views agree through the model at most of the points it puts on both (measured 0.47-1.0).
     assert all(len(record["agreement"]) == 2 and min(record["agreement"]) > 0.3 for record in result.pairs)
-    # Three views settle in two rounds (the second turns no pair by more than a few hundredths of a degree): no more.
+    # Three synthetic views settle within their two rounds (the second turns no pair by more than a few hundredths of a degree).
     assert len(result.turn_changes_deg) == 2 and result.turn_changes_deg[-1] <= RegistrationConfig().settled_turn_deg
 
 
@@ -38,11 +38,11 @@ def test_two_views_with_the_focal_held_take_rounds_until_their_turn_settles(uwa6
     (more carried ill-determined turns further off), and three views keep two rounds (docs/measurements.md, stop 74)."""
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
 
-    views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; this pair's second round turns it by ~0.04 degrees
+    views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; focal held, its rounds turn it 1.95 / 0.51 / 0.03 degrees
     held = GlobalAlignConfig(optimize_focal=False)
     config = RegistrationConfig(global_align=held)
     settled = _register(views, config)
-    assert len(settled.turn_changes_deg) == settled.rounds >= config.guided_rounds
+    assert len(settled.turn_changes_deg) == settled.rounds > config.guided_rounds
     assert settled.turn_changes_deg[-1] <= config.settled_turn_deg or settled.rounds == config.guided_rounds + config.extra_rounds
     never = _register(views, RegistrationConfig(global_align=held, settled_turn_deg=0.0, extra_rounds=2))
     assert never.rounds == config.guided_rounds + 2 and len(never.turn_changes_deg) == never.rounds

@@ -471,7 +471,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     min_turns[~placed, :], min_turns[:, ~placed] = np.nan, np.nan
     fitted = registered
     rounds = 0
-    settle: list[float] = []  # each guided round's largest change of a pair's turn, degrees
+    turn_changes: list[float] = []  # each guided round's largest change of a pair's turn, degrees
     cap = config.many_views_matches if n_views >= config.many_views else 0  # each pair's matches in the alignment
     check_weak = (config.matcher == "surface" and rig is None and config.undecided_peaks > 0
                   and config.weak_agreement_share > 0)  # once, after the first round
@@ -527,7 +527,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         solved_with = (refined + contours, min_turns)
         fitted = refined
         moved = turn_change_deg(before, alignment)
-        settle.append(round(moved, 3))
+        turn_changes.append(round(moved, 3))
         if (settling and sum(alignment.aligned) == 2 and rounds == limit and moved > config.settled_turn_deg
                 and limit < config.guided_rounds + config.extra_rounds):
             limit += 1
@@ -563,7 +563,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
                                                                                 solved_config, solved_with[1]))
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
                         photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours,
-                        turn_changes_deg=settle)
+                        turn_changes_deg=turn_changes)
 
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
