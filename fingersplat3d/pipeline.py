@@ -25,11 +25,11 @@ from .align.solve.rig import Rig, RigCapture
 from .align.transfer import MIN_PARALLAX_DEG, backed_shares, multi_view_backing
 from .device import per_item, resolve_device
 from .errors import InputError
-from .sampling import map_on_grid
+from .sampling import map_on_grid, resized_image, resized_mask
 from .scene import Camera, Capture, View
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
-from .working_scale import RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, working_views
+from .working_scale import RIDGE_PX, SPLAT_RIDGE_PX, TUNED_PX_PER_RIDGE, WorkingScale, working_views
 
 __all__ = ["FuseConfig", "Reconstruction", "fuse", "cloud_of_views", "unseen_skin_of", "write_reconstruction", "MIN_VIEWS",
            "MAX_RESIDUAL_PX", "refuse_focal_with_rig"]
@@ -69,9 +69,12 @@ class FuseConfig:
     voxel: float = 0.002
     """Voxel of the fused cloud, as a fraction of its extent (0 = keep every point)."""
     ridge_px: float | None = RIDGE_PX
-    """Working pixels per ridge period: photos that sample the ridges more finely are scaled down for the geometry
-    and the splat fit, and the outputs put back on the photos' grid (:mod:`fingersplat3d.working_scale`); None: the
-    photos' own resolution."""
+    """Working pixels per ridge period of the geometry: photos that sample the ridges more finely are scaled down for
+    the masks, pointmaps, registration and alignment, and the outputs put back on the photos' grid
+    (:mod:`fingersplat3d.working_scale`); None: the photos' own resolution."""
+    splat_ridge_px: float | None = SPLAT_RIDGE_PX
+    """Working pixels per ridge period of the splat fit (None: the photos' own resolution): the geometry's cameras and
+    depth maps are carried onto its grid, so that the fit sees the ridges as the camera sampled them."""
     focal_px: float | None = None
     """The cameras' focal length in the photos' pixels, when known (one camera model for every view): the pointmaps
     are made with it and the alignment keeps it instead of fitting one. Two views cannot fix the focal themselves
@@ -190,7 +193,6 @@ def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], 
                    report: dict) -> tuple[list[Camera], list]:
     """Cameras and per-view maps of the working resolution put back on the photos' pixel grid."""
     sizes = [(view.width, view.height) for view in photos.views]
-    report["working_resolution"] = scale.as_report(sizes)
     if scale.factor == 1.0:
         return cameras, list(maps)
     grow = [size[0] / camera.width for camera, size in zip(cameras, sizes)]
@@ -204,6 +206,30 @@ def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], 
     if registration.get("pointmaps_redrawn_at_px") is not None:  # one focal for all views: the first view's growth
         registration["pointmaps_redrawn_at_px"] = float(registration["pointmaps_redrawn_at_px"]) * grow[0]
     return cameras, out
+
+
+def _on_splat_grid(photos: Capture, capture: Capture, scale: WorkingScale, ridge_px: float | None, cameras: list[Camera],
+                   maps: Sequence[list[np.ndarray]], report: dict) -> tuple[Capture, WorkingScale, list[Camera], list, list[float]]:
+    """The working capture, its cameras and per-view maps carried from the geometry's grid onto the splat fit's
+    (``ridge_px`` working pixels per ridge, :data:`~fingersplat3d.working_scale.SPLAT_RIDGE_PX` by default), with that
+    grid's scale and each view's growth (its pixels per geometry pixel); as they are where the two grids are one."""
+    sizes = [(view.width, view.height) for view in photos.views]
+    fit = scale.at(ridge_px, sizes)
+    if fit.factor == scale.factor:
+        return capture, scale, cameras, list(maps), [1.0] * len(cameras)
+    if fit.factor == 1.0:
+        views = list(photos.views)
+    else:
+        views = per_item(lambda view: View(view.name, resized_image(view.image, fit.size((view.width, view.height))),
+                                           resized_mask(view.mask, fit.size((view.width, view.height)))), photos.views)
+    grow = [view.width / camera.width for view, camera in zip(views, cameras)]
+    cameras = [camera.resized((view.width, view.height)) for camera, view in zip(cameras, views)]
+    maps = [[map_on_grid(values, (view.width, view.height), view.mask) for values, view in zip(per_view, views)]
+            for per_view in maps]
+    registration = report.get("registration", {})
+    if registration.get("pointmaps_redrawn_at_px") is not None:  # one focal for all views: the first view's growth
+        registration["pointmaps_redrawn_at_px"] = float(registration["pointmaps_redrawn_at_px"]) * grow[0]
+    return Capture(tuple(views), capture.metadata), fit, cameras, maps, grow
 
 
 def _backend(config: FuseConfig):
@@ -617,9 +643,15 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                 depths = [d * mm_per_unit for d in depths]
                 cameras = [_scaled_camera(c, mm_per_unit) for c in cameras]
         bar.update()
-        splat = None
+        splat, grow = None, [1.0] * len(capture)
+        report["working_resolution"] = scale.as_report([(view.width, view.height) for view in photos.views])
         if config.splat is not None:
             from .splat.stage import run_splat_stage
+
+            capture, scale, cameras, (depths, confidences), grow = _on_splat_grid(
+                photos, capture, scale, config.splat_ridge_px, cameras, (depths, confidences), report)
+            if grow != [1.0] * len(capture):
+                report["working_resolution"]["splat"] = scale.as_report([(view.width, view.height) for view in photos.views])
 
             device = resolve_device(config.device)
             with step("splat"):
@@ -654,7 +686,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                       "different angles around the finger")
     report["alignment"].update(
         backed_by_two_views={name: None if share is None else round(share, 3) for name, share in zip(capture.names, support)},
-        residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d, focals_px=alignment.focals,
+        residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d,
+        focals_px=[float(focal) * g for focal, g in zip(alignment.focals, grow)],
         relief_scale=alignment.relief_scale, spanning_tree=[[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
         aligned=dict(zip(capture.names, alignment.aligned)))
     cameras, (depths, confidences, splat_depths) = _on_photo_grid(

@@ -2,8 +2,9 @@
 
 Ridges are what the registration matches and what the splat fit reproduces, so what sets their accuracy is how
 finely the ridges are sampled, not how many pixels the camera has. A photo that samples them much more finely (a
-20-megapixel camera, an upscaled crop) is scaled down before the masks, the pointmaps, the registration, the
-alignment and the splat fit; the outputs (cameras, depth maps, masks) are put back onto the photo's own pixel grid.
+20-megapixel camera, an upscaled crop) is scaled down before the masks, the pointmaps, the registration and the
+alignment (to :data:`RIDGE_PX`), and for the splat fit to its own :data:`SPLAT_RIDGE_PX` (the geometry needs fewer
+pixels than the ridges' look); the outputs (cameras, depth maps, masks) are put back onto the photo's own pixel grid.
 ``docs/measurements.md`` ("Working resolution") measures the rule.
 
 * The finger mask is found on a *survey* copy of at most :data:`SURVEY_SIDE` pixels: the mask's morphology uses
@@ -33,13 +34,17 @@ from .errors import InputError
 from .sampling import resized_image, resized_mask
 from .scene import View, scaled_size
 
-__all__ = ["RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
+__all__ = ["RIDGE_PX", "SPLAT_RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
 
 RIDGE_PX = 16.0
-"""Default working pixels per ridge period: the sampling of the real captures the project's accuracy was measured
-at (14-16 px per ridge at 1280x1024), so those run as they are and only finer photos are scaled. 8 px per ridge
-(``--ridge-px 8``) fuses them ~30 % faster for a measured cost on the real ones (docs/measurements.md, "Working
-resolution")."""
+"""Default working pixels per ridge period of the geometry (masks, pointmaps, registration, alignment): the sampling
+of the real captures the project's accuracy was measured at (14-16 px per ridge at 1280x1024), so those run as they
+are and only finer photos are scaled. 8 px per ridge (``--ridge-px 8``) fuses them ~30 % faster for a measured cost
+on the real ones: re-measured at stop 75 with the registration of then, the rig's every pair's median 0.91 against
+0.78 deg (docs/measurements.md, "Working resolution"); on synthetic fingers nothing measurable."""
+SPLAT_RIDGE_PX = 16.0
+"""Default working pixels per ridge period of the splat fit, its own (``--splat-ridge-px``): with the geometry at fewer
+(``--ridge-px 8``) the fit still sees the ridges as the camera sampled them, so that renders and prints keep them."""
 TUNED_PX_PER_RIDGE = 16.0
 """Pixels per ridge period of the real captures the alignment's robust scale (1 px) was tuned on (14-16); a
 scaled capture's robust scale keeps that share of a period (half a pixel at 8 px per ridge)."""
@@ -88,6 +93,11 @@ class WorkingScale:
         """The capture's ridge period in working pixels (the median of :meth:`working_view_periods_px`), or None."""
         periods = self.working_view_periods_px()
         return None if periods is None else float(np.median(periods))
+
+    def at(self, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> "WorkingScale":
+        """The same photos at another number of working pixels per ridge (None: their own resolution)."""
+        return WorkingScale(_factor(self.period_px, ridge_px, sizes), self.period_px, ridge_px, self.view_periods_px,
+                            self.surveyed_whole)
 
     def size(self, size: tuple[int, int]) -> tuple[int, int]:
         return size if self.factor == 1.0 else scaled_size(size, self.factor)

@@ -10,8 +10,8 @@ from fingersplat3d.eval import depth_errors, relative_rotation_errors
 from fingersplat3d.pipeline import FuseConfig, fuse
 from fingersplat3d.scene import Camera, Capture, View, look_at
 from fingersplat3d.synth import SynthConfig, synthesize
-from fingersplat3d.sampling import map_on_grid, resized_mask
-from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, working_views
+from fingersplat3d.sampling import map_on_grid, resized_image, resized_mask
+from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, SPLAT_RIDGE_PX, working_views
 
 
 @pytest.fixture(scope="module")
@@ -40,8 +40,10 @@ def test_fine_photos_are_scaled_to_the_asked_pixels_per_ridge(uwa1280):
 def test_photos_near_the_asked_resolution_or_none_asked_are_kept(uwa640, uwa1280):
     _, working, scale = working_views(uwa640.views, 8.0)  # ~9 px per ridge: not worth a resampling
     assert scale.factor == 1.0 and all(w.image is v.image for w, v in zip(working, uwa640.views))
-    _, working, scale = working_views(uwa1280.views, RIDGE_PX)  # ~18 px: the default keeps it
+    _, working, scale = working_views(uwa1280.views, SPLAT_RIDGE_PX)  # ~18 px: the splat fit's default keeps it
     assert scale.factor == 1.0 and all(w.image is v.image for w, v in zip(working, uwa1280.views))
+    assert scale.at(RIDGE_PX, [(1280, 1024)] * 3).factor == 1.0 and scale.at(8.0, [(1280, 1024)] * 3).factor < 0.6
+    assert scale.at(None, [(1280, 1024)] * 3).factor == 1.0
     _, working, scale = working_views(uwa640.views, None)
     assert scale.factor == 1.0 and np.isnan(scale.period_px)
     with pytest.raises(InputError, match="pixels per ridge"):
@@ -149,3 +151,46 @@ def test_a_view_blurred_beyond_its_ridges_is_named_and_the_sharp_ones_are_not(uw
     assert _ridgeless(Capture(tuple(sharp), {}), sharp_scale) == []
     unmeasured, _, unmeasured_scale = working_views(views, ridge_px=None)  # --ridge-px 0: nothing measured, no word
     assert _ridgeless(Capture(tuple(unmeasured), {}), unmeasured_scale) == []
+
+
+def test_the_splat_fits_on_its_own_grid_and_everything_comes_back_on_the_photos(uwa1280):
+    """The geometry at 8 px per ridge, the splat fit at SPLAT_RIDGE_PX (the photos' own ~18 px per ridge, kept): the
+    report names both grids, and the cameras, depth maps and focals are the photos' whatever grid made them."""
+    from fingersplat3d.splat.config import preset
+
+    capture = Capture(tuple(View(v.name, v.image) for v in uwa1280.views), uwa1280.metadata)
+    result = fuse(capture, FuseConfig(splat=preset("fast", iterations=20), ridge_px=8.0))
+    working = result.report["working_resolution"]
+    assert working["factor"] < 0.6 and working["splat"]["factor"] == 1.0
+    assert working["splat"]["sizes"][0] == [1280, 1024]
+    assert result.registered
+    for camera, depth, splat_depth in zip(result.cameras, result.depths, result.splat_depths):
+        assert camera.size == (1280, 1024) and depth.shape == splat_depth.shape == (1024, 1280)
+    assert result.report["alignment"]["focals_px"][0] == pytest.approx(result.cameras[0].K[0, 0], rel=1e-6)
+    assert result.report["splat"]["budget"] > 0
+
+
+def test_the_splat_grid_is_carried_onto_from_the_geometrys_either_way():
+    from fingersplat3d.pipeline import _on_splat_grid
+    from fingersplat3d.working_scale import WorkingScale
+
+    rng = np.random.default_rng(0)
+    mask = np.zeros((640, 800), bool)
+    mask[160:480, 120:680] = True
+    photos = Capture(tuple(View(name, rng.random((640, 800)).astype(np.float32), mask) for name in ("a", "b")), {})
+    scale = WorkingScale(0.4, 20.0, 8.0, (20.0, 20.0), True)
+    pose = look_at([0, 0, -5], [0, 0, 0], [0, -1, 0])
+    cameras = [Camera.from_focal(150.0, 320, 256, pose)] * 2
+    working = Capture(tuple(View(v.name, resized_image(v.image, (320, 256)), resized_mask(v.mask, (320, 256))) for v in photos.views), {})
+    depth = np.where(working.views[0].mask, 3.0, np.nan).astype(np.float32)
+    report = {"registration": {"pointmaps_redrawn_at_px": 150.0}}
+    capture, fit, moved, (depths,), grow = _on_splat_grid(photos, working, scale, 12.0, cameras, ([depth, depth],), report)
+    assert fit.factor == pytest.approx(0.6) and grow == [1.5, 1.5]  # 12 px per ridge of 20: 480x384
+    assert [(v.width, v.height) for v in capture.views] == [(480, 384)] * 2 and all(v.mask.shape == (384, 480) for v in capture.views)
+    assert moved[0].size == (480, 384) and moved[0].K[0, 0] == pytest.approx(225.0)
+    assert depths[0].shape == (384, 480) and np.nanmax(np.abs(depths[0] - 3.0)) < 1e-5
+    assert report["registration"]["pointmaps_redrawn_at_px"] == pytest.approx(225.0)
+    capture, fit, moved, _, grow = _on_splat_grid(photos, working, scale, None, cameras, ([depth, depth],), {})
+    assert fit.factor == 1.0 and capture.views[0] is photos.views[0] and moved[0].size == (800, 640) and grow == [2.5, 2.5]
+    same = _on_splat_grid(photos, working, scale, 8.0, cameras, ([depth, depth],), {})  # one grid: as it is
+    assert same[0] is working and same[1] is scale and same[4] == [1.0, 1.0]

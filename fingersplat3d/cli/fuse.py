@@ -8,7 +8,8 @@ from pathlib import Path
 
 from ..atomic import check_free
 from ..errors import EXIT_NOT_REGISTERED, InputError
-from .options import add_registration_arguments, add_splat_arguments, photometric_config, read_rig, ridge_px, splat_config
+from .options import (add_registration_arguments, add_splat_arguments, photometric_config, read_rig, ridge_px, splat_config,
+                      splat_ridge_px)
 from .types import COUNT, FINGER_MM, POSITIVE, PX_PER_MM, STEPS
 
 __all__ = ["add", "run"]
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     config = FuseConfig(backend=args.backend, checkpoint=None if args.checkpoint is None else str(args.checkpoint),
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         focal_px=args.focal_px, exif_focal=args.exif_focal, px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
-                        splat=splat_config(args), ridge_px=ridge_px(args))
+                        splat=splat_config(args), ridge_px=ridge_px(args), splat_ridge_px=splat_ridge_px(args))
     rig = read_rig(args.rig)
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True, rig=rig)

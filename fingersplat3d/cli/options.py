@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .types import COUNT, POSITIVE, SEED, STEPS, number
 
-__all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "ridge_px", "read_rig"]
+__all__ = ["add_registration_arguments", "photometric_config", "add_splat_arguments", "add_dataset_arguments", "splat_config", "fuse_config", "ridge_px", "splat_ridge_px", "read_rig"]
 
 
 def add_registration_arguments(parser) -> None:
@@ -25,9 +25,9 @@ def add_registration_arguments(parser) -> None:
                              "move the turns, and on synthetic fingers it does not make the depth better: docs/fuse.md)")
     parser.add_argument("--seed", type=SEED, default=0, help="seed of the random parts (RANSAC)")
     parser.add_argument("--ridge-px", type=number(float, 0.0, 1000.0), default=RIDGE_PX,
-                        help=f"working pixels per ridge period (default {RIDGE_PX:g}): photos that sample the ridges more "
-                             "finely (large camera photos) are scaled down for the geometry and the fit, and the outputs "
-                             "put back on the photos' grid; 0 keeps the photos' own resolution")
+                        help=f"working pixels per ridge period of the geometry (default {RIDGE_PX:g}): photos that sample "
+                             "the ridges more finely are scaled down for the masks, registration and alignment, and the "
+                             "outputs put back on the photos' grid; 0 keeps the photos' own resolution")
 
 
 def photometric_config(args: argparse.Namespace):
@@ -39,12 +39,16 @@ def photometric_config(args: argparse.Namespace):
 
 def add_splat_arguments(parser) -> None:
     from ..splat.config import DEFAULT_PRESET, PRESETS
+    from ..working_scale import SPLAT_RIDGE_PX
 
     splat = parser.add_argument_group("Gaussian splatting (fits gaussians.ply to the photos; on by default)")
     splat.add_argument("--no-splat", action="store_true", help="geometry only: skip the Gaussian-splat fit")
     splat.add_argument("--splat-preset", default=DEFAULT_PRESET, choices=tuple(PRESETS),
                        help=f"speed/accuracy trade (default {DEFAULT_PRESET}; measured in the README)")
     splat.add_argument("--splat-iterations", type=STEPS, help="override the preset's optimisation steps")
+    splat.add_argument("--splat-ridge-px", type=number(float, 0.0, 1000.0), default=SPLAT_RIDGE_PX,
+                       help=f"working pixels per ridge period of the splat fit (default {SPLAT_RIDGE_PX:g}: camera photos "
+                            "as they are); 0 keeps the photos' own resolution")
     splat.add_argument("--splat-gaussians-per-cell", "--splat-budget-density", type=POSITIVE, dest="splat_gaussians_per_cell",
                        help="override the preset's Gaussians per (ridge period/4)^2 of finger area "
                             "(--splat-budget-density: its former name)")
@@ -91,12 +95,19 @@ def fuse_config(args: argparse.Namespace):
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
                                       photometric=photometric_config(args))
     return FuseConfig(registration=registration, splat=splat_config(args) if hasattr(args, "no_splat") else None,
-                      mesh=getattr(args, "mesh", False), ridge_px=ridge_px(args))
+                      mesh=getattr(args, "mesh", False), ridge_px=ridge_px(args), splat_ridge_px=splat_ridge_px(args))
 
 
 def ridge_px(args: argparse.Namespace) -> float | None:
     """``--ridge-px`` as the fuse settings take it (0: None, the photos' own resolution)."""
     return args.ridge_px or None
+
+
+def splat_ridge_px(args: argparse.Namespace) -> float | None:
+    """``--splat-ridge-px`` as the fuse settings take it (0: None; the default where a command has no splat options)."""
+    from ..working_scale import SPLAT_RIDGE_PX
+
+    return getattr(args, "splat_ridge_px", SPLAT_RIDGE_PX) or None
 
 
 def read_rig(path: Path | None):
