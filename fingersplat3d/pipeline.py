@@ -648,9 +648,10 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         if config.splat is not None:
             from .splat.stage import run_splat_stage
 
+            geometry_scale = scale
             capture, scale, cameras, (depths, confidences), grow = _on_splat_grid(
                 photos, capture, scale, config.splat_ridge_px, cameras, (depths, confidences), report)
-            if grow != [1.0] * len(capture):
+            if scale is not geometry_scale:
                 report["working_resolution"]["splat"] = scale.as_report([(view.width, view.height) for view in photos.views])
 
             device = resolve_device(config.device)
