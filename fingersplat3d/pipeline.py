@@ -25,7 +25,7 @@ from .align.solve.rig import Rig, RigCapture
 from .align.transfer import MIN_PARALLAX_DEG, backed_shares, multi_view_backing
 from .device import per_item, resolve_device
 from .errors import InputError
-from .sampling import map_on_grid, resized_image, resized_mask
+from .sampling import map_on_grid
 from .scene import Camera, Capture, View
 from .splat.config import DEFAULT_PRESET, PRESETS, SplatConfig
 from .splat.voting import CleanConfig
@@ -217,11 +217,7 @@ def _on_splat_grid(photos: Capture, capture: Capture, scale: WorkingScale, ridge
     fit = scale.at(ridge_px, sizes)
     if fit.factor == scale.factor:
         return capture, scale, cameras, list(maps), [1.0] * len(cameras)
-    if fit.factor == 1.0:
-        views = list(photos.views)
-    else:
-        views = per_item(lambda view: View(view.name, resized_image(view.image, fit.size((view.width, view.height))),
-                                           resized_mask(view.mask, fit.size((view.width, view.height)))), photos.views)
+    views = list(photos.views) if fit.factor == 1.0 else working_views(photos.views, None, fit.factor)[1]
     grow = [view.width / camera.width for view, camera in zip(views, cameras)]
     cameras = [camera.resized((view.width, view.height)) for camera, view in zip(cameras, views)]
     maps = [[map_on_grid(values, (view.width, view.height), view.mask) for values, view in zip(per_view, views)]
@@ -644,7 +640,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                 cameras = [_scaled_camera(c, mm_per_unit) for c in cameras]
         bar.update()
         splat, grow = None, [1.0] * len(capture)
-        report["working_resolution"] = scale.as_report([(view.width, view.height) for view in photos.views])
+        photo_sizes = [(view.width, view.height) for view in photos.views]
+        report["working_resolution"] = scale.as_report(photo_sizes)
         if config.splat is not None:
             from .splat.stage import run_splat_stage
 
@@ -652,7 +649,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
             capture, scale, cameras, (depths, confidences), grow = _on_splat_grid(
                 photos, capture, scale, config.splat_ridge_px, cameras, (depths, confidences), report)
             if scale is not geometry_scale:
-                report["working_resolution"]["splat"] = scale.as_report([(view.width, view.height) for view in photos.views])
+                report["working_resolution"]["splat"] = scale.as_report(photo_sizes)
 
             device = resolve_device(config.device)
             with step("splat"):
