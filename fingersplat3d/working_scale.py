@@ -36,13 +36,15 @@ from .scene import View, scaled_size
 
 __all__ = ["RIDGE_PX", "SPLAT_RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
 
-RIDGE_PX = 16.0
-"""Default working pixels per ridge period of the geometry (masks, pointmaps, registration, alignment): the sampling
-of the real captures the project's accuracy was measured at (14-16 px per ridge at 1280x1024), so those run as they
-are and only finer photos are scaled. Measured at stop 75 (docs/measurements.md, "Working resolution"): 12 px per ridge
-(the real captures over 15 px scaled by ~0.76) kept every whole-capture figure and the crops, ~20 % faster, but the
-``--rig`` check could not be measured there (not adopted yet); 8 px per ridge (``--ridge-px 8``, a third faster) costs
-the rig's every-pair median 0.91 against 0.78 deg. On synthetic fingers nothing measurable at either."""
+RIDGE_PX = 12.0
+"""Default working pixels per ridge period of the geometry (masks, pointmaps, registration, alignment). The real
+captures sample their ridges at 14-16 px at 1280x1024; measured at stop 75 (docs/measurements.md, "Working resolution"):
+at 12 px per ridge (their coarser-sampled ones, over 15 px, scaled by ~0.76; the others kept, :data:`MIN_SHRINK`) the
+rig's consistency is the photos' own resolution's or better (every pair's median 0.78 deg either way; the held-out
+finger 1.06 / 1.16 / 1.36 against 1.25 / 1.12 / 1.36 deg), the crops without a tip the same, the ``--rig`` check
+(finger 1's rig against finger 2's, stop 76) 0.38 / 0.37 / 0.09 against 0.38 / 0.42 / 0.07 deg, the geometry of a
+scaled capture ~20 % faster; at 8 px per ridge (``--ridge-px 8``, a third faster) it costs 0.91 deg against 0.78. On
+synthetic fingers nothing measurable at either."""
 SPLAT_RIDGE_PX = 16.0
 """Default working pixels per ridge period of the splat fit, its own (``--splat-ridge-px``): with the geometry at fewer
 (:data:`RIDGE_PX`, ``--ridge-px 8``) the fit still sees the ridges as the camera sampled them, so that renders and

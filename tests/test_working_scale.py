@@ -43,8 +43,7 @@ def test_photos_near_the_asked_resolution_or_none_asked_are_kept(uwa640, uwa1280
     _, working, scale = working_views(uwa1280.views, SPLAT_RIDGE_PX)  # ~18 px: the splat fit's default keeps it
     assert scale.factor == 1.0 and all(w.image is v.image for w, v in zip(working, uwa1280.views))
     sizes = [(1280, 1024)] * 3
-    assert scale.at(RIDGE_PX, sizes).factor == 1.0 and scale.at(12.0, sizes).factor == pytest.approx(12.0 / scale.period_px)
-    assert scale.at(8.0, sizes).factor < 0.6
+    assert scale.at(RIDGE_PX, sizes).factor == pytest.approx(RIDGE_PX / scale.period_px) and scale.at(8.0, sizes).factor < 0.6
     assert scale.at(None, [(1280, 1024)] * 3).factor == 1.0
     _, working, scale = working_views(uwa640.views, None)
     assert scale.factor == 1.0 and np.isnan(scale.period_px)

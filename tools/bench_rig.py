@@ -1,8 +1,9 @@
 """Benchmark rig self-calibration: real dev captures (no ground truth) and synthetic captures (a known rig).
 
-    python3 tools/bench_rig.py [--data ../shared/data/uwa-real-dev] [--synthetic-seeds 8] [--focal each|one] [--json out.json]
+    python3 tools/bench_rig.py [--data ../shared/data/uwa-real-dev] [--synthetic-seeds 8] [--focal each|one] [--ridge-px N] [--json out.json]
 
-Real captures (``fs3d rig calibrate`` on all of them, then per capture):
+Real captures (``fs3d rig calibrate`` on all of them, each registered at the first one's working resolution as it
+does, then per capture):
 
 * the rig from all captures: angles, focal, captures used and left out, fit time;
 * **stability**: the rig calibrated from finger 1's captures alone against finger 2's alone (two
@@ -63,31 +64,38 @@ def _rig_camera2(two, rig, view2):
     return Camera.from_focal(rig.focals[2], view2.width, view2.height, np.linalg.inv(pose))
 
 
-def real(data: Path, per_camera: bool = True) -> dict:
+def real(data: Path, per_camera: bool = True, ridge_px: float | None = None) -> dict:
+    from dataclasses import replace
+
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
     from fingersplat3d.align.solve.rig import calibrate_rig
+    from fingersplat3d.cli.rig import shared_factor
     from fingersplat3d.io.jobs import list_jobs, load_job
     from fingersplat3d.pipeline import FuseConfig, fuse, register_capture
     from fingersplat3d.scene import Capture
 
-    config = FuseConfig(splat=None)
+    config = FuseConfig(splat=None) if ridge_px is None else FuseConfig(splat=None, ridge_px=ridge_px)
     fit = GlobalAlignConfig()
-    captures, pooled = {}, {}
-    for job in list_jobs([data]):
-        captures[job.name] = load_job(job)
-        pooled[job.name] = register_capture(captures[job.name], config)
+    jobs = list_jobs([data])
+    captures = {job.name: load_job(job) for job in jobs}
+    factor = shared_factor(jobs, config.ridge_px)  # one resolution for all, as fs3d rig calibrate
+    pooled = {name: register_capture(capture, config, factor=factor) for name, capture in captures.items()}
     names = tuple(next(iter(captures.values())).names)
+
+    def calibrated(chosen):  # the rig's focals in the photos' pixels (a fuse scales them its own way)
+        calibration = calibrate_rig(chosen, names, fit, per_camera)
+        return replace(calibration, rig=replace(calibration.rig, focals=calibration.rig.focals / factor))
+
     start = time.perf_counter()
-    everything = calibrate_rig(list(pooled.values()), names, fit, per_camera)
+    everything = calibrated(list(pooled.values()))
     fit_s = time.perf_counter() - start
     by_finger = {}
     for finger in sorted({name.split("_")[1] for name in pooled}):
-        chosen = [c for name, c in pooled.items() if name.split("_")[1] == finger]
-        by_finger[finger] = calibrate_rig(chosen, names, fit, per_camera).rig
+        by_finger[finger] = calibrated([c for name, c in pooled.items() if name.split("_")[1] == finger]).rig
     fingers = sorted(by_finger)
     records = []
     for name, capture in captures.items():
-        others = calibrate_rig([c for other, c in pooled.items() if other != name], names, fit, per_camera).rig
+        others = calibrated([c for other, c in pooled.items() if other != name]).rig
         start = time.perf_counter()
         three = fuse(capture, config, rig=others)
         seconds = time.perf_counter() - start
@@ -101,7 +109,8 @@ def real(data: Path, per_camera: bool = True) -> dict:
                         "rig_lovo": on_rig, "free_lovo": leave_one_view_out(free_three, free_two)})
         print(f"{name}: residual {records[-1]['residual_px']:.2f} px on the rig, texture NCC {on_rig.get('texture_ncc')} "
               f"(free {records[-1]['free_lovo']['texture_ncc']})", file=sys.stderr, flush=True)
-    return {"rig": {"angles_deg": _pair_angles(everything.rig), "focals": everything.rig.focals.tolist(), "used": everything.used,
+    return {"working_factor": factor,
+            "rig": {"angles_deg": _pair_angles(everything.rig), "focals": everything.rig.focals.tolist(), "used": everything.used,
                     "left_out": everything.left_out, "fit_s": fit_s},
             "fingers": {f: {"angles_deg": _pair_angles(by_finger[f]), "focals": by_finger[f].focals.tolist()} for f in fingers},
             "finger_difference_deg": _rig_difference(by_finger[fingers[0]], by_finger[fingers[-1]]) if len(fingers) > 1 else None,
@@ -150,6 +159,8 @@ def main() -> int:
     parser.add_argument("--synthetic-seeds", type=int, default=8)
     parser.add_argument("--focal", choices=("each", "one"), default="each",
                         help="each camera its own focal length (default, as fs3d rig calibrate) or one for all")
+    parser.add_argument("--ridge-px", type=float, default=None,
+                        help="the geometry's pixels per ridge period on the real captures (default: fuse's)")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     figures = {"machine": machine()}
@@ -157,7 +168,7 @@ def main() -> int:
         figures["synthetic"] = synthetic(args.synthetic_seeds, args.focal == "each")
         print(json.dumps(figures["synthetic"], indent=1, default=float), flush=True)
     if args.data.is_dir():
-        figures["real"] = real(args.data, args.focal == "each")
+        figures["real"] = real(args.data, args.focal == "each", args.ridge_px)
         print(json.dumps({k: v for k, v in figures["real"].items() if k != "records"}, indent=1, default=float))
         print("| capture | residual on the rig / free (px) | leave-one-view-out on the rig: outside mask, texture NCC | free (PnP) |")
         print("|---|---|---|---|")

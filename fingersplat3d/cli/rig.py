@@ -12,7 +12,7 @@ from ..errors import EXIT_NOT_REGISTERED, InputError
 from .options import add_dataset_arguments, fuse_config
 from .types import number
 
-__all__ = ["add", "run", "register_job"]
+__all__ = ["add", "run", "register_job", "shared_factor"]
 
 NAME = "rig"
 HELP = "a fixed camera rig: calibrate it from many captures"
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
             captures.append(capture)
 
     # One working resolution for every capture: the focal lengths the calibration pools are in its pixels.
-    factor = _shared_factor(jobs, config.ridge_px)
+    factor = shared_factor(jobs, config.ridge_px)
 
     def register(selected, rig=None, desc="fs3d rig calibrate"):
         return ray_map(register_job, selected, (config, args.threads_per_task, rig, factor), on_result,
@@ -111,9 +111,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _shared_factor(jobs, ridge_px: float | None) -> float:
-    """The working resolution of the first capture that can be read (1 when none can: their failures come later,
-    each with its reason)."""
+def shared_factor(jobs, ridge_px: float | None) -> float:
+    """One working resolution for every capture a rig pools (the focal lengths it pools are in its pixels): that of
+    the first capture that can be read (1 when none can: their failures come later, each with its reason)."""
     from ..io.jobs import load_job
     from ..working_scale import working_views
 
