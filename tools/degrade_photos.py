@@ -1,10 +1,11 @@
 """Degraded copies of a folder of photos, for registration under worse light, noise and size than the dev captures.
 
-    python3 tools/degrade_photos.py SRC OUT --kind noise|small|dark|faint|hazy [--seed 0]
+    python3 tools/degrade_photos.py SRC OUT --kind noise|small|half|dark|faint|hazy [--seed 0]
     python3 tools/bench_real.py --data OUT
 
 Every image of SRC (its own files, sorted) is written to OUT under its own name: ``noise`` adds Gaussian noise of
-sigma 8 grey levels and saves at JPEG quality 60; ``small`` shrinks to 0.6x (area filter, JPEG 95); ``dark`` keeps
+sigma 8 grey levels and saves at JPEG quality 60; ``small`` shrinks to 0.6x (area filter, JPEG 95), ``half`` to 0.5x (1280x1024 -> 640x512, the size of the
+synthetic tables); ``dark`` keeps
 0.3x the light with noise of sigma 3 (JPEG 90); ``faint`` blurs by sigma 1 px, halves the contrast about the image's
 mean and adds noise of sigma 4 (JPEG 95); ``hazy`` blurs by 1.3 px, keeps 0.4 of the contrast about the mean (a dark
 background lifted to a third of the skin's level, as under haze or glare) and adds noise of sigma 5 (JPEG 90). Noise draws from ``numpy.random.default_rng(seed)`` in file order.
@@ -29,8 +30,9 @@ def degrade(image: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.
     pixels = image.astype(np.float32)
     if kind == "noise":
         return np.clip(pixels + rng.normal(0, 8, pixels.shape), 0, 255).astype(np.uint8), 60
-    if kind == "small":
-        return np.clip(cv2.resize(pixels, None, fx=0.6, fy=0.6, interpolation=cv2.INTER_AREA), 0, 255).astype(np.uint8), 95
+    if kind in ("small", "half"):
+        factor = 0.6 if kind == "small" else 0.5
+        return np.clip(cv2.resize(pixels, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA), 0, 255).astype(np.uint8), 95
     if kind in ("faint", "hazy"):
         sigma, contrast, noise, quality = (1.0, 0.5, 4, 95) if kind == "faint" else (1.3, 0.4, 5, 90)
         pixels = cv2.GaussianBlur(pixels, (0, 0), sigma)
@@ -44,7 +46,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("src", type=Path)
     parser.add_argument("out", type=Path)
-    parser.add_argument("--kind", choices=("noise", "small", "dark", "faint", "hazy"), required=True)
+    parser.add_argument("--kind", choices=("noise", "small", "half", "dark", "faint", "hazy"), required=True)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     files = sorted(p for p in args.src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if args.src.is_dir() else []
