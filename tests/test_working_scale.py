@@ -195,3 +195,27 @@ def test_the_splat_grid_is_carried_onto_from_the_geometrys_either_way():
     assert fit.factor == 1.0 and capture.views[0] is photos.views[0] and moved[0].size == (800, 640) and grow == [2.5, 2.5]
     same = _on_splat_grid(photos, working, scale, 8.0, cameras, ([depth, depth],), {})  # one grid: as it is
     assert same[0] is working and same[1] is scale and same[4] == [1.0, 1.0]
+
+
+def test_a_rig_calibration_works_every_capture_at_the_first_readable_ones_resolution(uwa1280, tmp_path):
+    """``fs3d rig calibrate`` pools focal lengths in working pixels, so its captures share one working resolution:
+    the first capture that can be read sets it (one with a missing frame is passed over), whatever the others' own."""
+    from fingersplat3d.cli.rig import shared_factor
+    from fingersplat3d.io.jobs import CaptureJob, load_job
+
+    jobs = {}
+    for name, size in (("fine", 1.0), ("coarse", 0.8)):  # ~18 and ~14 px per ridge
+        folder = tmp_path / name
+        folder.mkdir()
+        files = []
+        for view in uwa1280.views:
+            image = view.image if size == 1.0 else resized_image(view.image, (round(view.width * size), round(view.height * size)))
+            files.append(str(folder / f"{view.name}.png"))
+            cv2.imwrite(files[-1], np.round(255 * np.clip(image, 0, 1)).astype(np.uint8))
+        jobs[name] = CaptureJob(name, tuple(files))
+    own = {name: working_views(load_job(job).views, RIDGE_PX)[2].factor for name, job in jobs.items()}
+    assert own["fine"] < 0.8 and own["coarse"] == 1.0  # each alone at its own: scaled, and kept
+    broken = CaptureJob("broken", (), problem="frame 1 is missing")
+    assert shared_factor([broken, jobs["fine"], jobs["coarse"]], RIDGE_PX) == own["fine"]
+    assert shared_factor([jobs["coarse"], jobs["fine"]], RIDGE_PX) == own["coarse"]
+    assert shared_factor([broken], RIDGE_PX) == 1.0
