@@ -74,7 +74,7 @@ def real(data: Path, per_camera: bool = True, ridge_px: float | None = None) -> 
     from fingersplat3d.pipeline import FuseConfig, fuse, register_capture
     from fingersplat3d.scene import Capture
 
-    config = FuseConfig(splat=None) if ridge_px is None else FuseConfig(splat=None, ridge_px=ridge_px)
+    config = FuseConfig(splat=None) if ridge_px is None else FuseConfig(splat=None, ridge_px=ridge_px or None)  # 0: the photos'
     fit = GlobalAlignConfig()
     jobs = list_jobs([data])
     captures = {job.name: load_job(job) for job in jobs}
@@ -160,7 +160,7 @@ def main() -> int:
     parser.add_argument("--focal", choices=("each", "one"), default="each",
                         help="each camera its own focal length (default, as fs3d rig calibrate) or one for all")
     parser.add_argument("--ridge-px", type=float, default=None,
-                        help="the geometry's pixels per ridge period on the real captures (default: fuse's)")
+                        help="the geometry's pixels per ridge period on the real captures (default: fuse's; 0: the photos' own resolution)")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     figures = {"machine": machine()}
