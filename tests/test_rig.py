@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fingersplat3d.align.register import register_views
-from fingersplat3d.align.solve.rig import Rig, calibrate_rig, quarter_turn, robust_rotation_mean
+from fingersplat3d.align.solve.rig import Rig, RigCalibration, calibrate_rig, quarter_turn, robust_rotation_mean
 from fingersplat3d.cli import main
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval.poses import rotation_angle_deg
@@ -51,6 +51,16 @@ def test_robust_mean_ignores_one_outlier_and_quarter_turns_compose():
     mean = robust_rotation_mean(good + [outlier])
     assert rotation_angle_deg(mean, good[1]) < 0.5
     assert np.allclose(quarter_turn(1) @ quarter_turn(3), np.eye(3)) and np.allclose(quarter_turn(2), np.diag([-1, -1, 1]))
+
+
+def test_a_calibration_at_a_working_resolution_gives_its_focals_in_photo_pixels():
+    """Captures registered at 0.75 of their photos' size pool focal lengths in working pixels: the rig file's are the
+    photos' (its sizes already are), its poses unchanged."""
+    rig = Rig(("a", "b"), ((1280, 1024), (1280, 1024)), np.stack([np.eye(3)] * 2), np.array([[0, 0, 0], [1.0, 0, 0]]),
+              np.array([900.0, 960.0]))
+    photo = RigCalibration(rig, ["c"], {}, {"c": 0.4}, {}).in_photo_pixels(0.75)
+    assert np.allclose(photo.rig.focals, [1200.0, 1280.0]) and photo.rig.sizes == rig.sizes
+    assert photo.rig.rotations is rig.rotations and photo.used == ["c"] and np.allclose(rig.focals, [900.0, 960.0])
 
 
 def test_calibration_recovers_the_rig_better_than_single_captures(registered, calibrated):

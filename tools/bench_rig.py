@@ -65,8 +65,6 @@ def _rig_camera2(two, rig, view2):
 
 
 def real(data: Path, per_camera: bool = True, ridge_px: float | None = None) -> dict:
-    from dataclasses import replace
-
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
     from fingersplat3d.align.solve.rig import calibrate_rig
     from fingersplat3d.cli.rig import shared_factor
@@ -82,9 +80,8 @@ def real(data: Path, per_camera: bool = True, ridge_px: float | None = None) -> 
     pooled = {name: register_capture(capture, config, factor=factor) for name, capture in captures.items()}
     names = tuple(next(iter(captures.values())).names)
 
-    def calibrated(chosen):  # the rig's focals in the photos' pixels (a fuse scales them its own way)
-        calibration = calibrate_rig(chosen, names, fit, per_camera)
-        return replace(calibration, rig=replace(calibration.rig, focals=calibration.rig.focals / factor))
+    def calibrated(chosen):  # the rig's focals in the photos' pixels
+        return calibrate_rig(chosen, names, fit, per_camera).in_photo_pixels(factor)
 
     start = time.perf_counter()
     everything = calibrated(list(pooled.values()))

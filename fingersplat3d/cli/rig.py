@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from ..atomic import check_free
@@ -70,12 +69,9 @@ def run(args: argparse.Namespace) -> int:
         return ray_map(register_job, selected, (config, args.threads_per_task, rig, factor), on_result,
                        address=args.address, cpus_per_task=args.threads_per_task, num_cpus=args.workers, desc=desc)
 
-    def calibrated(selected):
-        return in_photo_pixels(calibrate_rig(sorted(selected, key=lambda c: c.name), names[0], fit,
-                                             per_camera_focal=args.focal == "each"))
-
-    def in_photo_pixels(calibration):  # the rig file's focal is the photos' (any later fuse scales it its own way)
-        return replace(calibration, rig=replace(calibration.rig, focals=calibration.rig.focals / factor))
+    def calibrated(selected):  # the rig file's focal is the photos'
+        return calibrate_rig(sorted(selected, key=lambda c: c.name), names[0], fit,
+                             per_camera_focal=args.focal == "each").in_photo_pixels(factor)
 
     run = register(jobs)
     names = sorted({c.view_names for c in captures})

@@ -162,6 +162,11 @@ class RigCalibration:
     residual_px: dict[str, float]  # per used capture
     alignments: dict[str, GlobalAlignment]
 
+    def in_photo_pixels(self, factor: float) -> "RigCalibration":
+        """The same calibration with the rig's focal lengths in the photos' pixels, its captures registered at the
+        working resolution ``factor`` (a rig's sizes are the photos' already; any later fuse scales it its own way)."""
+        return replace(self, rig=replace(self.rig, focals=self.rig.focals / factor))
+
 
 # ------------------------------------------------------------------------------------------ model
 
