@@ -174,6 +174,45 @@ def test_a_pair_thinned_for_many_views_keeps_its_weight_and_spreads_evenly():
     assert _pair_correspondences(0, 1, matches, np.eye(4), cap=2000).weight.shape == (n,)
 
 
+def test_with_many_views_a_pair_whose_views_others_placed_is_matched_through_the_model_alone(uwa640):
+    """``many_views`` lowered to three and one first guess per view asked: the first two pairs place every view, so
+    the third pair's first guess is skipped and the guided rounds match it through the model; the turns stay those of
+    every pair's guess (synthetic: within a few degrees)."""
+    config = RegistrationConfig(many_views=3, first_guesses_per_view=1)
+    result = _register(uwa640.views, config)
+    assert all(result.alignment.aligned)
+    skipped = [record for record in result.pairs if record.get("first_guess_skipped")]
+    assert [(record["a"], record["b"]) for record in skipped] == [(uwa640.views[1].name, uwa640.views[2].name)]
+    (record,) = skipped
+    assert record["ok"] and len(record["matches"]) == result.rounds == 2 and min(record["matches"]) >= 40
+    assert all(len(other["matches"]) == 3 for other in result.pairs if other is not record)
+    truth = [view.camera.world_to_cam for view in uwa640.views]
+    assert np.max(relative_rotation_errors(result.alignment.world_to_cam, truth)) < 3.0
+
+
+def test_with_many_views_every_pair_is_guessed_when_a_view_ends_unplaced(uwa640, monkeypatch):
+    """The first alignment leaving a view unplaced (forced here): the skipped pairs get their first guesses after all,
+    and the alignment is solved again from every pair's."""
+    import dataclasses
+
+    import fingersplat3d.align.register as register
+
+    solve, calls = register.global_align, []
+
+    def first_drops_the_last_view(*args, **kwargs):
+        alignment = solve(*args, **kwargs)
+        calls.append(len(args[2]))
+        if len(calls) == 1:
+            alignment = dataclasses.replace(alignment, aligned=[*alignment.aligned[:-1], False])
+        return alignment
+
+    monkeypatch.setattr(register, "global_align", first_drops_the_last_view)
+    result = _register(uwa640.views, RegistrationConfig(many_views=3, first_guesses_per_view=1, guided_rounds=0))
+    assert calls[:2] == [2, 3]  # two pairs' first guesses, then all three
+    assert not any(record.get("first_guess_skipped") for record in result.pairs)
+    assert all(record["ok"] and len(record["matches"]) == 1 for record in result.pairs) and all(result.alignment.aligned)
+
+
 @pytest.mark.slow
 def test_views_whose_votes_are_all_undecided_are_placed_by_agreement_through_the_model(uwa640, monkeypatch):
     """Every chart vote undecided (the ratio it must reach raised out of reach): with ``undecided_peaks`` off no view

@@ -6,7 +6,9 @@ The loop (all numbers scale with the measured ridge period):
    unwrapped on their cylinder charts, their shift voted by patches
    (:mod:`~fingersplat3d.align.correspond.chart_shift`), and guided matching through the charts with a
    search of two ridge periods (:mod:`~fingersplat3d.align.correspond.guided`); the classic matchers
-   (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.correspond.features` can stand in for it;
+   (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.correspond.features` can stand in for it. From
+   ``many_views`` views on, a pair whose views are each registered with ``first_guesses_per_view`` others already is
+   left to the guided rounds (step 4);
 2. **verification**: a robust fundamental matrix (:mod:`~fingersplat3d.align.correspond.epipolar`); a
    pair is registered when at least ``min_matches`` correspondences agree with it, and its
    similarity ``b_to_a`` comes from the two pointmaps at the matched pixels
@@ -130,6 +132,11 @@ class RegistrationConfig:
     (evenly over the overlap, the pair's weight kept): ten views make 45 pairs of up to 1500 matches each, and forming
     the normal equations of ~90k correspondences was a quarter of the time. Measured (10 CFPose-style views, 3 seeds):
     the same errors (0.19 degrees, 0.051 mm), 59.9 -> 45.7 s, 1.67 -> 1.37 GB; at 200: 0.21 degrees, 43.9 s."""
+    first_guesses_per_view: int = 2
+    """With ``many_views`` views or more, a pair's first guess (step 1) is skipped when each of its views is already
+    registered with this many others: its views are placed without it, and the guided rounds match it through the
+    model like a pair that had no first guess. Every pair is guessed after all when a view ends unplaced. Ten views make
+    45 first guesses, nearly half of the registration (0: every pair's, as below ``many_views``)."""
     epipolar_px: float = 0.1
     """Fundamental-matrix inlier threshold, in ridge periods (at least 1 pixel)."""
     global_align: GlobalAlignConfig = field(default_factory=GlobalAlignConfig)
@@ -427,10 +434,13 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         charts, unwrapped = prepared.charts(frames)
     rng = np.random.default_rng(config.seed)
     registered = []
-    for a, b in pairs:
+    partners = np.zeros(n_views, int)  # registered first guesses per view
+
+    def first_guess(a: int, b: int) -> None:
         say(f"first guess {views[a].name}-{views[b].name}")
         record = records[(a, b)]
         record["method"] = config.matcher
+        record.pop("first_guess_skipped", None)
         guess = (_surface_guess(prepared, a, b, charts, unwrapped, config, record) if config.matcher == "surface"
                  else _classic_guess(prepared, a, b, config))
         verified = _verified(guess, prepared.period, config)
@@ -438,13 +448,24 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         if len(verified) < config.min_matches:
             record["reason"] = record["reason"] or (f"only {len(verified)} of {len(guess)} matches agree on the epipolar "
                                                     f"geometry; {config.min_matches} are needed")
-            continue
+            return
         pair, why = _similar_pair(pointmaps, a, b, verified, config, rng)
         if pair is None:
             record["reason"] = f"the pointmaps do not fit one similarity: {why}"
-            continue
+            return
         registered.append(pair)
+        partners[a] += 1
+        partners[b] += 1
         record.update(ok=True, reason="")
+
+    skipped = []  # pairs whose views others had registered enough (RegistrationConfig.first_guesses_per_view)
+    for a, b in pairs:
+        if (n_views >= config.many_views and config.first_guesses_per_view > 0
+                and min(partners[a], partners[b]) >= config.first_guesses_per_view):
+            skipped.append((a, b))
+            records[(a, b)]["first_guess_skipped"] = True
+            continue
+        first_guess(a, b)
     depths = [pointmap.depth for pointmap in pointmaps]
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
@@ -458,6 +479,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         return rig_align(d, f, matches, cfg, rig, sizes, previous, contours)
 
     alignment = align(depths, focals, registered, config.global_align)
+    if skipped and not all(alignment.aligned):  # a view the others did not place after all: every pair's guess
+        for a, b in skipped:
+            first_guess(a, b)
+        skipped = []
+        alignment = align(depths, focals, registered, config.global_align)
     if ((config.undecided_peaks > 0 or config.undecided_zooms) and config.matcher == "surface" and rig is None
             and not all(alignment.aligned)):
         say("undecided votes: their peaks and other zooms through the model")
