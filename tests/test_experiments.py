@@ -28,6 +28,20 @@ def test_cfpose_views_spread_over_the_roll_with_the_extremes(count):
     assert picked[0] == min(rolls) and picked[-1] == max(rolls)
 
 
+def test_a_case_of_more_views_than_cfposes_default_shots_synthesizes_as_many(tmp_path):
+    """cfpose20 asks 20 shots of ``fs3d synth`` (its default is 10, which would leave half the views repeated), its
+    captures apart from the ten-shot cases'; the other rigs take no shots."""
+    import pickle
+
+    from fingersplat3d.experiments.geometry import synth_captures
+
+    assert (CASES["cfpose20"].shots, CASES["cfpose3"].shots, CASES["ring5"].shots) == (20, 10, 0)
+    assert CASES["cfpose20"].synth_key != CASES["cfpose10"].synth_key
+    (path,) = synth_captures([0], tmp_path, (96, 120), "cfpose", shots=12)
+    capture = pickle.loads(path.read_bytes())
+    assert len(capture.views) == 12 and len(pick_views(capture, GeometryCase("cfpose", 12, (96, 120)))) == 12
+
+
 def test_ring_and_uwa_views():
     assert pick_views(None, CASES["ring5"]) == ("v0", "v1", "v2", "v3", "v4")
     assert pick_views(None, CASES["ring2"]) == ("v0", "v2")

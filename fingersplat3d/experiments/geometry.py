@@ -53,8 +53,13 @@ class GeometryCase:
         return f"{self.rig} {self.views} views {self.size[0]}x{self.size[1]}{far}{wide}{zoom}"
 
     @property
+    def shots(self) -> int:
+        """The shots ``fs3d synth`` takes of a cfpose finger: its default 10, or as many as the case fuses."""
+        return max(10, self.views) if self.rig == "cfpose" else 0
+
+    @property
     def synth_key(self) -> tuple:
-        return (self.rig, self.size, self.distance_mm, self.shapes, self.zoom)
+        return (self.rig, self.size, self.distance_mm, self.shapes, self.zoom, self.shots)
 
 
 CASES = {
@@ -62,6 +67,7 @@ CASES = {
     "uwa2": GeometryCase("uwa", 2), "uwa3": GeometryCase("uwa", 3),
     "cfpose2": GeometryCase("cfpose", 2, (512, 640)), "cfpose3": GeometryCase("cfpose", 3, (512, 640)),
     "cfpose5": GeometryCase("cfpose", 5, (512, 640)), "cfpose10": GeometryCase("cfpose", 10, (512, 640)),
+    "cfpose20": GeometryCase("cfpose", 20, (512, 640)),
     "uwa3-1280": GeometryCase("uwa", 3, (1280, 1024)),
     "uwa3-wide": GeometryCase("uwa", 3, shapes="wide"), "ring5-wide": GeometryCase("ring", 5, shapes="wide"),
     "uwa3-close": GeometryCase("uwa", 3, distance_mm=50.0), "uwa3-far": GeometryCase("uwa", 3, distance_mm=400.0),
@@ -102,9 +108,11 @@ def score_geometry(result, truth: dict) -> dict:
 
 
 def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str,
-                   distance_mm: float = CAMERA_DISTANCE_MM, shapes: str = "adult", zoom: float = 1.0) -> list[Path]:
+                   distance_mm: float = CAMERA_DISTANCE_MM, shapes: str = "adult", zoom: float = 1.0,
+                   shots: int = 0) -> list[Path]:
     """One ``fs3d synth`` capture of ``rig`` per seed (ring: cameras at :data:`RING_ANGLES`; the focal ``zoom`` times
-    the rig's default), pickled into ``folder`` for measurements that run in other processes."""
+    the rig's default; cfpose: ``shots`` poses, 0 for its default), pickled into ``folder`` for measurements that run
+    in other processes."""
     import pickle
 
     from ..synth import SynthConfig, synthesize
@@ -113,9 +121,11 @@ def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: s
     options = {"angles": RING_ANGLES} if rig == "ring" else {}
     if zoom != 1.0:
         options["focal"] = zoom * default_focal(size, distance_mm)
+    if rig == "cfpose" and shots:
+        options["poses"] = shots
     paths = []
     for seed in seeds:
-        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{shapes}-{zoom:g}x-{seed}.pkl"
+        path = folder / f"{rig}-{size[0]}x{size[1]}-{distance_mm:g}mm-{shapes}-{zoom:g}x-{shots}-{seed}.pkl"
         config = SynthConfig(rig=rig, size=size, distance_mm=distance_mm, shapes=shapes, **options)
         path.write_bytes(pickle.dumps(synthesize(seed, config).capture))
         paths.append(path)
@@ -161,8 +171,9 @@ def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progr
     config = config or FuseConfig(splat=None)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        paths = {(rig, size, far, shapes, zoom): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig, far, shapes, zoom)]
-                 for rig, size, far, shapes, zoom in dict.fromkeys(case.synth_key for case in cases)}
+        paths = {(rig, size, far, shapes, zoom, shots): [str(p) for p in synth_captures(seeds, Path(scratch), size, rig,
+                                                                                         far, shapes, zoom, shots)]
+                 for rig, size, far, shapes, zoom, shots in dict.fromkeys(case.synth_key for case in cases)}
         for case in tqdm(cases, desc="geometry", unit="case", disable=not progress):
             rows += in_fresh_process(_measure_case, case, paths[case.synth_key], config)
     return rows
