@@ -622,7 +622,8 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     continue
                 done.add(pair)
                 say(f"undecided votes: {record['a']}-{record['b']}, their peaks and other zooms")
-                for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, "turn_ratio" in record):
+                voted = "turn_ratio" in record or record.get("first_guess_skipped", False)  # a skipped pair's vote: now
+                for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, voted):
                     entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
                     if zoom != 1.0:
                         entry["zoom"] = round(zoom, 3)
