@@ -190,6 +190,25 @@ def test_with_many_views_a_pair_whose_views_others_placed_is_matched_through_the
     assert np.max(relative_rotation_errors(result.alignment.world_to_cam, truth)) < 3.0
 
 
+def test_a_view_placed_again_reads_the_votes_of_its_pairs_whose_first_guess_was_skipped(monkeypatch):
+    """A view to place by agreement: a pair whose first guess was skipped has no vote on record, and its charts' peaks
+    are asked for all the same (a pair guessed whose charts found no patch in common is not asked again)."""
+    from types import SimpleNamespace
+
+    import fingersplat3d.align.register as register
+
+    asked = []
+    monkeypatch.setattr(register, "_candidate_shifts",
+                        lambda a, b, prepared, charts, unwrapped, config, voted: asked.append(((a, b), voted)) or [])
+    records = {(0, 2): {"a": "v0", "b": "v2", "ok": False, "first_guess_skipped": True},
+               (1, 2): {"a": "v1", "b": "v2", "ok": False, "reason": "no patch correlates"}}
+    pointmaps = [SimpleNamespace(depth=None, focal=1.0)] * 3
+    alignment = SimpleNamespace(aligned=[True, True, False], root=0)
+    placed = register._placed_by_agreement(alignment, [], list(records), records, SimpleNamespace(period=10.0), None,
+                                           None, pointmaps, None, RegistrationConfig(), None, lambda text: None)
+    assert asked == [((0, 2), True), ((1, 2), False)] and placed is alignment
+
+
 def test_with_many_views_every_pair_is_guessed_when_a_view_ends_unplaced(uwa640, monkeypatch):
     """The first alignment leaving a view unplaced (forced here): the skipped pairs get their first guesses after all,
     and the alignment is solved again from every pair's."""
