@@ -434,7 +434,6 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         charts, unwrapped = prepared.charts(frames)
     rng = np.random.default_rng(config.seed)
     registered = []
-    partners = np.zeros(n_views, int)  # registered first guesses per view
 
     def first_guess(a: int, b: int) -> None:
         say(f"first guess {views[a].name}-{views[b].name}")
@@ -454,18 +453,21 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             record["reason"] = f"the pointmaps do not fit one similarity: {why}"
             return
         registered.append(pair)
-        partners[a] += 1
-        partners[b] += 1
         record.update(ok=True, reason="")
 
-    skipped = []  # pairs whose views others had registered enough (RegistrationConfig.first_guesses_per_view)
+    def placed_enough(a: int, b: int) -> bool:
+        """From ``many_views`` views on: each of the pair's views already registered with ``first_guesses_per_view``
+        others, so its first guess is left to the guided rounds."""
+        if n_views < config.many_views or config.first_guesses_per_view <= 0:
+            return False
+        partners = np.bincount([view for p in registered for view in (p.a, p.b)], minlength=n_views)
+        return min(partners[a], partners[b]) >= config.first_guesses_per_view
+
     for a, b in pairs:
-        if (n_views >= config.many_views and config.first_guesses_per_view > 0
-                and min(partners[a], partners[b]) >= config.first_guesses_per_view):
-            skipped.append((a, b))
+        if placed_enough(a, b):
             records[(a, b)]["first_guess_skipped"] = True
-            continue
-        first_guess(a, b)
+        else:
+            first_guess(a, b)
     depths = [pointmap.depth for pointmap in pointmaps]
     focals = [pointmap.focal for pointmap in pointmaps]
     say("global alignment")
@@ -479,10 +481,10 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         return rig_align(d, f, matches, cfg, rig, sizes, previous, contours)
 
     alignment = align(depths, focals, registered, config.global_align)
+    skipped = [pair for pair in pairs if records[pair].get("first_guess_skipped")]
     if skipped and not all(alignment.aligned):  # a view the others did not place after all: every pair's guess
         for a, b in skipped:
             first_guess(a, b)
-        skipped = []
         alignment = align(depths, focals, registered, config.global_align)
     if ((config.undecided_peaks > 0 or config.undecided_zooms) and config.matcher == "surface" and rig is None
             and not all(alignment.aligned)):
@@ -622,7 +624,8 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                     continue
                 done.add(pair)
                 say(f"undecided votes: {record['a']}-{record['b']}, their peaks and other zooms")
-                voted = "turn_ratio" in record or record.get("first_guess_skipped", False)  # a skipped pair's vote: now
+                # a pair whose first guess was skipped has not voted yet: its peaks are computed here
+                voted = "turn_ratio" in record or record.get("first_guess_skipped", False)
                 for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, voted):
                     entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
                     if zoom != 1.0:
