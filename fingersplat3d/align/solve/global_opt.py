@@ -78,8 +78,18 @@ class GlobalAlignConfig:
     rolls 45 degrees apart (docs/measurements.md): the wide triplets' worst pairs 5.7-9.8 -> 0.3-2.7 degrees."""
     field_knots: float = 8.0
     """Knot intervals of each view's depth field across the finger's short side (0 = no field)."""
-    field_smoothness: float = 0.05
-    """Bending penalty of the depth fields."""
+    field_smoothness: float = 0.002
+    """Bending penalty of the depth fields, with three views or more aligned (:data:`PIVOT_MIN_VIEWS`). Where the
+    finger's section is not the pointmap prior's, the fields must bend to take the difference up; held stiff
+    (0.05 until stop 78), the turns, the relief and the focal took it instead. Measured (docs/measurements.md, stop
+    78): real captures, every camera pair 0.78 -> 0.68 degrees from the rig's mean (the held-out finger 1.06 / 1.16 /
+    1.36 -> 0.76 / 1.14 / 1.22), focal spread 15 -> 12 %, two views predicting the third's silhouette 25.6 -> 12.5 %
+    off; sections unlike the prior's and close-ups the frame cuts (synthetic) fewer turns off by degrees; a finger of the
+    prior's own section 0.01 mm more depth error (0.042 -> 0.052 mm)."""
+    two_view_field_smoothness: float = 0.05
+    """The same penalty with two views aligned: their bas-relief valley is open, and stiffer fields keep them where
+    the pair's own similarity put them (synthetic ring and CFPose, two views: 0.002 moved the turns by degrees either
+    way and doubled the depth error of some)."""
     field_prior: float = 1e-4
     """Pull of the field coefficients toward 0 (keeps coefficients no correspondence reaches bounded)."""
     robust_px: float = 1.0
@@ -311,7 +321,8 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
     problem = AlignmentProblem(depths, grids, data, initial, free, shared_focal=config.shared_focal,
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
-                               field_smoothness=config.field_smoothness, field_prior=config.field_prior,
+                               field_smoothness=(config.field_smoothness if sum(aligned) >= PIVOT_MIN_VIEWS
+                                                 else config.two_view_field_smoothness), field_prior=config.field_prior,
                                focal_prior=config.focal_prior, shared_relief=config.shared_relief,
                                min_turns=min_turns, turn_bound_weight=config.turn_bound_weight,
                                pivot=_pivot(initial, root) if config.pivot_poses and sum(aligned) >= PIVOT_MIN_VIEWS else None)
