@@ -486,3 +486,21 @@ def test_a_known_focal_is_refused_where_it_cannot_be_used(uwa, tmp_path, capsys)
     assert main(["batch", sample, "-o", str(tmp_path / "o"), "--rig", str(tmp_path / "rig.json"), "--focal-px", "900"]) == 2
     assert "--focal-px" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("bases, probe, warned", [
+    (("taper", "other views", "other views"), {"held": True}, True),  # every view cut at both ends, the focal fitted
+    (("outline", "other views", "other views"), {"held": True}, False),  # one view's outline closes at the tip
+    (("taper", "taper", "taper"), None, False),  # the focal given (no probe): nothing to warn of
+])
+def test_a_capture_without_a_visible_tip_is_warned(bases, probe, warned):
+    from types import SimpleNamespace
+
+    from fingersplat3d.pipeline import NO_TIP_WARNING, _warn_without_tip
+    from fingersplat3d.segment.silhouette import TIP_BASES
+
+    names = ["left", "center", "right"]
+    report = {"views": names, "warnings": [],
+              "registration": {"tip": {n: {"side": "left", "why": TIP_BASES[b]} for n, b in zip(names, bases)}}}
+    _warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe), report)
+    assert any(w.startswith(NO_TIP_WARNING) and "--focal-px" in w for w in report["warnings"]) == warned

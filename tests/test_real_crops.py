@@ -43,7 +43,7 @@ def test_a_real_capture_cropped_to_no_tip_is_told_its_focal_is_not_held(real_dev
     hold the focal, report.json says so and a warning says what fixes it; the whole capture holds it. (1_1_1_1's crop,
     the capture used before, holds its focal since the first guesses grow: 1595 px, the rig's 1661.)"""
     from fingersplat3d.io.datasets import load_uwa
-    from fingersplat3d.pipeline import FuseConfig, fuse
+    from fingersplat3d.pipeline import NO_TIP_WARNING, FuseConfig, fuse
     from fingersplat3d.scene import Capture
 
     (real,) = [c for c in load_uwa(real_dev) if c.metadata["name"] == "1_1_3_1"]
@@ -52,5 +52,6 @@ def test_a_real_capture_cropped_to_no_tip_is_told_its_focal_is_not_held(real_dev
     probe = report["alignment"]["focal_probe"]
     assert not probe["held"] and probe["longer_loss_rise"] < 0.015 and probe["shorter_share"] < 1  # measured -3.0 %, 0.59
     assert any("do not hold the focal" in warning and "--focal-px" in warning for warning in report["warnings"])
+    assert any(warning.startswith(NO_TIP_WARNING) for warning in report["warnings"])  # no view's outline closes at the tip
     # measured 2.87 (1_1_1_1's crop before the growth: 1.49); the whole capture's pairs move 0.6-1.2 deg
     assert max(report["alignment"]["turn_sensitivity_deg"].values()) > 1.0

@@ -113,7 +113,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
     ``two_views``: also every pair of views fused alone, against the same turn with all three
     (:func:`two_view_turn_errors`)."""
     from ..eval.poses import rotation_angle_deg
-    from ..pipeline import FuseConfig, fuse
+    from ..pipeline import NO_TIP_WARNING, FuseConfig, fuse
     from ..scene import Capture
 
     config = config or FuseConfig(splat=None)
@@ -130,7 +130,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "turn_uncertainty_deg": report["alignment"].get("turn_uncertainty_deg", {}),
               "turn_sensitivity_deg": report["alignment"].get("turn_sensitivity_deg", {}),
               "focal_probe": report["alignment"].get("focal_probe", {}),
-              "warned_turns": any(_TURN_WARNING in str(w) for w in report.get("warnings", [])),
+              "warned_turns": any(_TURN_WARNING in str(w) or NO_TIP_WARNING in str(w) for w in report.get("warnings", [])),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
               "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
