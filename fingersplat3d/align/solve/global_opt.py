@@ -318,14 +318,15 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
     """The problem of one capture: the aligned views' correspondences, the root view fixed."""
     data = _correspondences(depths, pairs, aligned)
     free = [aligned[v] and v != root for v in range(len(depths))]
+    closed = sum(aligned) >= PIVOT_MIN_VIEWS  # three views or more: the bas-relief valley closed
     problem = AlignmentProblem(depths, grids, data, initial, free, shared_focal=config.shared_focal,
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
-                               field_smoothness=(config.field_smoothness if sum(aligned) >= PIVOT_MIN_VIEWS
-                                                 else config.two_view_field_smoothness), field_prior=config.field_prior,
-                               focal_prior=config.focal_prior, shared_relief=config.shared_relief,
-                               min_turns=min_turns, turn_bound_weight=config.turn_bound_weight,
-                               pivot=_pivot(initial, root) if config.pivot_poses and sum(aligned) >= PIVOT_MIN_VIEWS else None)
+                               field_smoothness=config.field_smoothness if closed else config.two_view_field_smoothness,
+                               field_prior=config.field_prior, focal_prior=config.focal_prior,
+                               shared_relief=config.shared_relief, min_turns=min_turns,
+                               turn_bound_weight=config.turn_bound_weight,
+                               pivot=_pivot(initial, root) if config.pivot_poses and closed else None)
     return problem, data
 
 
