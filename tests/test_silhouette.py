@@ -217,9 +217,30 @@ def test_a_view_the_frame_cuts_along_its_side_takes_its_widths_from_the_others()
     assert abs(completed_peak - true_peak) < 0.03 * true_peak < abs(plain_peak - true_peak)
 
 
+def test_a_view_cut_from_just_behind_its_cap_takes_the_ratio_on_the_cap():
+    """A thick side view the bottom border cuts from just behind its tip's cap to the base: no whole chord off the cap
+    is left to take the views' ratio from, so it is taken on the cap, and the pad's bulge comes back within a few
+    pixels where the cap's own chords, completed, leave it 12 px narrow or more."""
+    from fingersplat3d.segment.side_cut import capture_frames, side_cut_widths
+
+    masks = [_pad_view(60, 150, cols=300), _pad_view(66, 150, cols=300), _pad_view(66, 240, cols=300)]
+    assert masks[2][-1].sum() > 150 and not masks[2][-1, :90].any()  # cut behind the cap, not through it
+    assert side_cut_widths(masks)[2] is not None
+    plain, completed = orient_frames(masks)[2], capture_frames(masks)[2]
+    u = np.arange(140, 290)
+    pixels, truth = np.stack([u, np.full(u.size, 240.0)], 1), _pad_profile(u, 66)
+
+    def error(frame):
+        s, _ = frame.coordinates(pixels)
+        return np.abs(frame.sections.at(s)[0] - truth).max()
+
+    assert completed.widths_from_views and error(completed) < 4.0 and error(plain) > 10.0
+
+
 def test_a_view_cut_along_its_whole_side_keeps_its_own_widths():
-    """With no whole chord off the tip's cap to take the ratio from, nothing stands in for a cut view's widths; a
-    capture of one view has no other to take them from; the chords of views cut only across their end stay theirs."""
+    """With too few whole chords to take the ratio from, even on the tip's cap, nothing stands in for a cut view's
+    widths; a capture of one view has no other to take them from; the chords of views cut only across their end stay
+    theirs."""
     from fingersplat3d.segment.side_cut import side_cut_widths
 
     cut_everywhere = _pad_view(66, 150)[:150 + 40]  # the bottom border cuts it from the cap to the base
