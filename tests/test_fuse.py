@@ -488,19 +488,25 @@ def test_a_known_focal_is_refused_where_it_cannot_be_used(uwa, tmp_path, capsys)
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("bases, probe, warned", [
-    (("taper", "other views", "other views"), {"held": True}, True),  # every view cut at both ends, the focal fitted
-    (("outline", "other views", "other views"), {"held": True}, False),  # one view's outline closes at the tip
-    (("taper", "taper", "taper"), None, False),  # the focal given (no probe): nothing to warn of
+STEADY, LOOSE = np.full((3, 3), 0.01), np.array([[np.nan, 0.2, 0.9], [0.2, np.nan, 0.4], [0.9, 0.4, np.nan]])
+
+
+@pytest.mark.parametrize("bases, probe, moves, warned", [
+    (("taper", "other views", "other views"), {"held": True}, None, True),  # every view cut at both ends, focal fitted
+    (("taper", "other views", "other views"), {"held": True}, LOOSE, True),  # one pair follows the focal
+    (("taper", "other views", "other views"), {"held": True}, STEADY, False),  # no turn follows it (orthographic)
+    (("outline", "other views", "other views"), {"held": True}, LOOSE, False),  # one view's outline closes at the tip
+    (("taper", "taper", "taper"), None, None, False),  # the focal given (no probe): nothing to warn of
 ])
-def test_a_capture_without_a_visible_tip_is_warned(bases, probe, warned):
+def test_a_capture_without_a_visible_tip_is_warned(bases, probe, moves, warned):
     from types import SimpleNamespace
 
-    from fingersplat3d.pipeline import NO_TIP_WARNING, _warn_without_tip
+    from fingersplat3d.pipeline import NO_TIP_SENSITIVITY_DEG, NO_TIP_WARNING, _warn_without_tip
     from fingersplat3d.segment.silhouette import TIP_BASES
 
+    assert np.nanmax(STEADY) < NO_TIP_SENSITIVITY_DEG < np.nanmax(LOOSE)
     names = ["left", "center", "right"]
     report = {"views": names, "warnings": [],
               "registration": {"tip": {n: {"side": "left", "why": TIP_BASES[b]} for n, b in zip(names, bases)}}}
-    _warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe), report)
+    _warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe, turn_sensitivity_deg=moves), report)
     assert any(w.startswith(NO_TIP_WARNING) and "--focal-px" in w for w in report["warnings"]) == warned
