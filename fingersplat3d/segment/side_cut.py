@@ -28,10 +28,11 @@ one's widths to stand in for the other's."""
 CAP_FALLBACK = 0.1
 """:func:`side_cut_widths`: where two views share fewer whole chords off the tip's cap than :data:`MIN_SHARED_STATIONS`
 (a thick finger whose side the frame cuts from just behind its cap), the ratio is taken over the cap's whole chords
-too, from this share of a half-width behind the tip (the very tip's few pixels are too short to compare). On the cap
-the views' width ratio lies within 3-6 % of the body's (``fs3d synth`` uwa, wide shapes, seed 4, zoomed out until no
-view is cut: a side view against the other side's 0.95 on the cap, 0.98 on the body; against the front's 1.14 and
-1.08), where the chords completed from the cap alone come out 15-20 % narrow."""
+too, where both views' outlines close at the tip (a crop cut at both ends has no cap to compare), from this share of
+a half-width behind the tip (the very tip's few pixels are too short to compare). On the cap the views' width ratio
+lies within 3-6 % of the body's (``fs3d synth`` uwa, wide shapes, seed 4, zoomed out until no view is cut: a side
+view against the other side's 0.95 on the cap, 0.98 on the body; against the front's 1.14 and 1.08), where the
+chords completed from the cap alone come out 15-20 % narrow."""
 
 
 def capture_frames(masks: list[np.ndarray], smoothing: float = 0.15) -> list[SilhouetteFrame]:
@@ -88,8 +89,8 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
             cap = float(np.median(width_o[whole_o]))  # the tip's cap is about a half-width long
             both = whole & np.isfinite(given)
             shared = both & (sigma > cap)
-            if shared.sum() < MIN_SHARED_STATIONS:
-                shared = both & (sigma > CAP_FALLBACK * cap)
+            if shared.sum() < MIN_SHARED_STATIONS and frame.tip_found and frames[other].tip_found:
+                shared = both & (sigma > CAP_FALLBACK * cap)  # a cap to compare only where both outlines close at it
             if shared.sum() >= MIN_SHARED_STATIONS:
                 estimates.append(float(np.median(width[shared] / given[shared])) * given)
         if not estimates:
