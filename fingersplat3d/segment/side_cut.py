@@ -57,9 +57,9 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
     a ratio that holds along the body (a section's shape changes slowly along it). So a view whose chords the frame
     cuts at one side over :data:`SIDE_CUT_SHARE` of its stations takes, at each cut station, another view's whole
     chord at the same distance from the tip times the two views' median ratio over the whole chords they share off the
-    tip's cap (:data:`MIN_SHARED_STATIONS` at least, else over the cap's too, :data:`CAP_FALLBACK`; the median over the
-    views that give one). None for a view that
-    is not cut so, or that no other view can stand in for. A capture no view of which the border touches along its
+    tip's cap (:data:`MIN_SHARED_STATIONS` at least; else over the cap's too where both outlines close at the tip,
+    :data:`CAP_FALLBACK`; the median over the views that give one). None for a view that is not cut so, or that no
+    other view can stand in for. A capture no view of which the border touches along its
     axis is answered before any frame is made or read. What the caller holds it passes: ``frames``
     (:func:`~fingersplat3d.segment.silhouette.orient_frames`'s), ``hints`` (:func:`capture_axes`'s) or ``axes`` (each
     view's :func:`finger_axis`; the frames' axes when they are given).
