@@ -487,7 +487,7 @@ def _warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
     placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
     if alignment.focal_probe is None or len(placed) < 3 or any(tip is None for tip in placed):
         return
-    moves = getattr(alignment, "turn_sensitivity_deg", None)
+    moves = alignment.turn_sensitivity_deg
     if moves is not None and np.isfinite(moves).any() and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG:
         return
     if all(tip["why"] != TIP_BASES["outline"] for tip in placed):
