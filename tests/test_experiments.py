@@ -137,3 +137,17 @@ def _square(x):
 
 def test_a_measurement_runs_in_a_fresh_process():
     assert in_fresh_process(_square, 7) == 49 and peak_rss_mb() > 10
+
+
+def _open3d_as_loaded():
+    import sys
+
+    import open3d  # noqa: F401
+
+    return "dash" in sys.modules, sys.modules["open3d.visualization.draw_plotly"].__doc__ or ""
+
+
+def test_a_measured_process_loads_open3d_as_fs3d_does():
+    """Without the web viewer, as the fs3d command and its batch workers load it: a measured time is the command's."""
+    dash_loaded, viewer = in_fresh_process(_open3d_as_loaded)
+    assert not dash_loaded and "not loaded" in viewer
