@@ -501,12 +501,12 @@ STEADY, LOOSE = np.full((3, 3), 0.01), np.array([[np.nan, 0.2, 0.9], [0.2, np.na
 def test_a_capture_without_a_visible_tip_is_warned(bases, probe, moves, warned):
     from types import SimpleNamespace
 
-    from fingersplat3d.pipeline import NO_TIP_SENSITIVITY_DEG, NO_TIP_WARNING, _warn_without_tip
+    from fingersplat3d.alignment_status import NO_TIP_SENSITIVITY_DEG, NO_TIP_WARNING, warn_without_tip
     from fingersplat3d.segment.silhouette import TIP_BASES
 
     assert np.nanmax(STEADY) < NO_TIP_SENSITIVITY_DEG < np.nanmax(LOOSE)
     names = ["left", "center", "right"]
     report = {"views": names, "warnings": [],
               "registration": {"tip": {n: {"side": "left", "why": TIP_BASES[b]} for n, b in zip(names, bases)}}}
-    _warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe, turn_sensitivity_deg=moves), report)
+    warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe, turn_sensitivity_deg=moves), report)
     assert any(w.startswith(NO_TIP_WARNING) and "--focal-px" in w for w in report["warnings"]) == warned

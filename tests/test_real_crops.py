@@ -43,7 +43,8 @@ def test_a_real_capture_cropped_to_no_tip_is_told_its_focal_is_not_held(real_dev
     hold the focal, report.json says so and a warning says what fixes it; the whole capture holds it. (1_1_1_1's crop,
     the capture used before, holds its focal since the first guesses grow: 1595 px, the rig's 1661.)"""
     from fingersplat3d.io.datasets import load_uwa
-    from fingersplat3d.pipeline import NO_TIP_WARNING, FuseConfig, fuse
+    from fingersplat3d.alignment_status import NO_TIP_WARNING
+    from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.scene import Capture
 
     (real,) = [c for c in load_uwa(real_dev) if c.metadata["name"] == "1_1_3_1"]

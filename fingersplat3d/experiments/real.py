@@ -113,7 +113,8 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
     ``two_views``: also every pair of views fused alone, against the same turn with all three
     (:func:`two_view_turn_errors`)."""
     from ..eval.poses import rotation_angle_deg
-    from ..pipeline import NO_TIP_WARNING, FuseConfig, fuse
+    from ..alignment_status import NO_TIP_WARNING
+    from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
 
     config = config or FuseConfig(splat=None)
