@@ -66,16 +66,17 @@ def write_depth(path: str | Path, depth: np.ndarray) -> Path:
     return path
 
 
-def _nearness(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Valid mask and ``[0, 1]`` nearness (1 = nearest valid pixel, 0 = farthest)."""
+def _nearness(depth: np.ndarray, span: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Valid mask and ``[0, 1]`` nearness (1 = nearest valid pixel, 0 = farthest; ``span``: the (near, far) these stand
+    for instead, clipped to it)."""
     depth = np.asarray(depth, np.float64)
     if depth.ndim != 2:
         raise ValueError(f"depth map must be 2-D (H x W), got shape {depth.shape}")
     valid = np.isfinite(depth)
     nearness = np.zeros(depth.shape)
     if valid.any():
-        near, far = depth[valid].min(), depth[valid].max()
-        nearness[valid] = 1.0 if far == near else (far - depth[valid]) / (far - near)
+        near, far = (depth[valid].min(), depth[valid].max()) if span is None else span
+        nearness[valid] = 1.0 if far == near else np.clip((far - depth[valid]) / (far - near), 0.0, 1.0)
     return valid, nearness
 
 
@@ -90,9 +91,11 @@ def write_depth_preview(path: str | Path, depth: np.ndarray) -> Path:
     return path
 
 
-def depth_colormap(depth: np.ndarray, colormap: int = cv2.COLORMAP_TURBO) -> np.ndarray:
-    """An ``H x W x 3`` RGB uint8 picture of a depth map (near = hot end of ``colormap``, NaN black)."""
-    valid, nearness = _nearness(depth)
+def depth_colormap(depth: np.ndarray, colormap: int = cv2.COLORMAP_TURBO,
+                   span: tuple[float, float] | None = None) -> np.ndarray:
+    """An ``H x W x 3`` RGB uint8 picture of a depth map (near = hot end of ``colormap``, NaN black; ``span``: the
+    (near, far) depths the colour map's ends stand for, default the map's own)."""
+    valid, nearness = _nearness(depth, span)
     levels = np.round(nearness * 255).astype(np.uint8)
     rgb = cv2.applyColorMap(levels, colormap)[..., ::-1]
     return np.ascontiguousarray(np.where(valid[..., None], rgb, 0).astype(np.uint8))
