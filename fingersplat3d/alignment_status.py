@@ -45,11 +45,11 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
         reasons = "; ".join(f"{p['a']}-{p['b']}: {p['reason']}" for p in report.get("pairs", []) if not p["ok"] and p["reason"])
         status.update(ok=False, not_registered=missing, reason=reasons)
         warn(report, f"view(s) {', '.join(missing)} could not be registered with the others ({reasons}); "
-                      "their depth comes from the pointmap alone and they are left out of the fused cloud")
+                     "their depth comes from the pointmap alone and they are left out of the fused cloud")
     elif np.isfinite(alignment.residual_px) and alignment.residual_px > MAX_RESIDUAL_PX:
         status.update(ok=False, reason=f"global alignment residual {alignment.residual_px:.1f} px")
         warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than {MAX_RESIDUAL_PX:g} px): "
-                      "the cameras are probably wrong")
+                     "the cameras are probably wrong")
     if alignment.turn_uncertainty_deg is not None:
         status["turn_uncertainty_deg"] = _per_pair(names, alignment.turn_uncertainty_deg, 3)
         loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
@@ -58,11 +58,11 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
             focal_fitted = (sum(alignment.aligned) == 2 and settings.get("focal_px") is None
                             and settings.get("view_focals_px") is None and not report.get("exif_focal", {}).get("used"))
             warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
-                  + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
-                  "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
-                  + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
-                     "cameras' focal with --focal-px if it is known (photos whose EXIF records it give it themselves), or add a "
-                     "view" if focal_fitted else ""))
+                 + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
+                 "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
+                 + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
+                    "cameras' focal with --focal-px if it is known (photos whose EXIF records it give it themselves), or add a "
+                    "view" if focal_fitted else ""))
     if alignment.turn_sensitivity_deg is not None:
         status["turn_sensitivity_deg"] = _per_pair(names, alignment.turn_sensitivity_deg, 2)
         loose = {pair: value for pair, value in status["turn_sensitivity_deg"].items() if value > MAX_TURN_SENSITIVITY_DEG}
@@ -72,17 +72,17 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
         if probe is not None and not probe["held"] and sum(alignment.aligned) >= 3:
             moved = max(status["turn_sensitivity_deg"].items(), key=lambda item: item[1])
             warn(report, "the photos do not hold the focal: the fit slides toward a longer, nearly orthographic one, and a "
-                          f"focal {1 / probe['shorter_share']:.1f} times shorter fits about as well (the loss "
-                          f"{100 * probe['shorter_loss_rise']:+.0f} %), with the turn between {moved[0]} {moved[1]:.1f}° "
-                          "away; seen on crops without the fingertip whose outer views share no skin (real ones: turns up "
-                          "to 19° off)" + (f"; the focal is taken at the short end of what fits, {probe['taken_share']:.2f} of "
-                                           "where the fit slid" if probe.get("taken_share") else "")
-                          + ": the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
+                         f"focal {1 / probe['shorter_share']:.1f} times shorter fits about as well (the loss "
+                         f"{100 * probe['shorter_loss_rise']:+.0f} %), with the turn between {moved[0]} {moved[1]:.1f}° "
+                         "away; seen on crops without the fingertip whose outer views share no skin (real ones: turns up "
+                         "to 19° off)" + (f"; the focal is taken at the short end of what fits, {probe['taken_share']:.2f} of "
+                                          "where the fit slid" if probe.get("taken_share") else "")
+                         + ": the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
         elif loose:
             warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
-                  + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
-                  f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "
-                  "the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
+                 + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
+                 f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "
+                 "the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     warn_without_tip(alignment, report)
     _check_turns_against_widths(capture, alignment, status, report)
     return status
@@ -114,8 +114,8 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
         return
     if all(tip["why"] != TIP_BASES["outline"] for tip in placed):
         warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest on the "
-                      "skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % off); the "
-                      "cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
+                     "skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % off); the "
+                     "cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
 
 
 def _per_pair(names: Sequence[str], values: np.ndarray, digits: int) -> dict[str, float]:
@@ -147,6 +147,6 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
     status["turn_at_least_deg"] = least
     if short:
         warn(report, "the turn between " + ", ".join(short) + " is smaller than the views' silhouette widths allow "
-              "if the widest view faces the finger's widest extent (turning about a finger cannot narrow it faster "
-              "than cos(turn)): either the turn is too small, or that view is oblique to a flat finger (then the bound "
-              "does not hold)")
+             "if the widest view faces the finger's widest extent (turning about a finger cannot narrow it faster "
+             "than cos(turn)): either the turn is too small, or that view is oblique to a flat finger (then the bound "
+             "does not hold)")

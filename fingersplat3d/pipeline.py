@@ -583,8 +583,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
     shares = [share for share in support if share is not None]
     if len(shares) >= 2 and max(shares) < NO_PARALLAX_SHARE:
         warn(report, f"no two views see the finger from {MIN_PARALLAX_DEG:g}° or more apart (the same place, or the same "
-                      "photo moved): its depth is the pointmap's guess, as from one photo; take the photos from "
-                      "different angles around the finger")
+                     "photo moved): its depth is the pointmap's guess, as from one photo; take the photos from "
+                     "different angles around the finger")
     report["alignment"].update(
         backed_by_two_views={name: None if share is None else round(share, 3) for name, share in zip(capture.names, support)},
         residual_px=alignment.residual_px, residual_rel3d=alignment.residual_rel3d,
