@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from ..atomic import atomic_path
+from ..sampling import map_on_grid, resized_mask
 from .cameras import UNITS
 from .depth import depth_colormap, write_depth, write_depth_preview
 from .images import write_image
@@ -98,16 +99,6 @@ def _label(value: float, decimals: int, units: str) -> str:
     return f"{value:.{decimals}f} {'mm' if units == 'mm' else 'units'}"
 
 
-def _area_shrunk(depth: np.ndarray, height: int) -> np.ndarray:
-    """``depth`` shrunk to ``height`` rows by area averaging over its finite pixels; NaN where fewer than half of a
-    pixel's area had depth."""
-    size = (max(1, round(depth.shape[1] * height / depth.shape[0])), height)
-    finite = np.isfinite(depth)
-    total = cv2.resize(np.where(finite, depth, 0.0).astype(depth.dtype), size, interpolation=cv2.INTER_AREA)
-    weight = cv2.resize(finite.astype(depth.dtype), size, interpolation=cv2.INTER_AREA)
-    return np.where(weight >= 0.5, total / np.maximum(weight, 1e-12), np.nan).astype(np.float64)
-
-
 def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int = 192,
                          max_height: int = 2048) -> np.ndarray:
     """``depth_colormap`` of ``depth`` with a colour bar on the right labelled near/far in ``units``.
@@ -121,7 +112,9 @@ def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int =
     valid = np.isfinite(depth)
     span = (float(np.nanmin(depth)), float(np.nanmax(depth))) if valid.any() else None
     if depth.shape[0] > max_height:  # the depth shrunk before it is coloured: a 20-megapixel map's colours cost 1.3 s
-        picture = depth_colormap(_area_shrunk(depth, max_height), span=span)
+        size = (max(1, round(depth.shape[1] * max_height / depth.shape[0])), max_height)
+        # averaged over its finite pixels, NaN where under half a pixel's area has depth; coloured over the whole range
+        picture = depth_colormap(map_on_grid(depth, size, resized_mask(valid, size)), span=span)
     else:
         picture = depth_colormap(depth)
         if picture.shape[0] < min_height:
