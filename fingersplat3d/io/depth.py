@@ -76,7 +76,11 @@ def _nearness(depth: np.ndarray, span: tuple[float, float] | None = None) -> tup
     nearness = np.zeros(depth.shape)
     if valid.any():
         near, far = (depth[valid].min(), depth[valid].max()) if span is None else span
-        nearness[valid] = 1.0 if far == near else np.clip((far - depth[valid]) / (far - near), 0.0, 1.0)
+        if far == near:
+            nearness[valid] = 1.0
+        else:
+            ratio = (far - depth[valid]) / (far - near)
+            nearness[valid] = ratio if span is None else np.clip(ratio, 0.0, 1.0)  # a map's own range needs no clip
     return valid, nearness
 
 
