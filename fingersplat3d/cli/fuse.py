@@ -20,7 +20,7 @@ HELP = "3D finger from 2-N uncalibrated photos: cameras, fused point cloud, Gaus
 
 def add(commands) -> None:
     """``fs3d fuse``: its arguments."""
-    from ..align.solve.global_opt import GlobalAlignConfig
+    from ..align.solve.settings import GlobalAlignConfig
 
     fuse = commands.add_parser(
         NAME, help=HELP,
@@ -72,21 +72,24 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..align.register import RegistrationConfig
-    from ..align.solve.global_opt import GlobalAlignConfig
-    from ..device import resolve_device
+    from ..align.registration_config import RegistrationConfig
+    from ..align.solve.settings import GlobalAlignConfig
     from ..io.datasets import load_any
-    from ..pipeline import FuseConfig, fuse, write_reconstruction
 
     check_free(args.output, args.overwrite)
     if args.backend == "dust3r" and args.checkpoint is None:
         raise InputError("--backend dust3r needs --checkpoint PATH (a DUSt3R .pth file; nothing is downloaded)")
     if args.backend != "dust3r" and args.checkpoint is not None:
         raise InputError(f"--checkpoint is only used by --backend dust3r (the {args.backend} backend has no weights)")
-    resolve_device(args.device)  # an unusable device is an error before any work
     captures = load_any(args.inputs)
     if len(captures) != 1:
         raise InputError(f"{args.inputs[0]}: holds {len(captures)} captures; fuse one at a time (pass one capture's files)")
+    rig = read_rig(args.rig)
+    # Torch is loaded from here on (~2 s): a wrong path or option above has been said without waiting for it.
+    from ..device import resolve_device
+    from ..pipeline import FuseConfig, fuse, write_reconstruction
+
+    resolve_device(args.device)  # an unusable device is an error before any work
     registration = RegistrationConfig(matcher=args.matcher, guided_rounds=args.guided_rounds, seed=args.seed,
                                       photometric=photometric_config(args), global_align=GlobalAlignConfig(polish_iterations=args.polish_iterations,
                                                                      solver=args.alignment_solver))
@@ -94,7 +97,6 @@ def run(args: argparse.Namespace) -> int:
                         device=args.device, pair_batch=args.pair_batch, registration=registration, icp=args.icp,
                         focal_px=args.focal_px, exif_focal=args.exif_focal, px_per_mm=args.px_per_mm, finger_width_mm=args.finger_width_mm, mesh=args.mesh,
                         splat=splat_config(args), ridge_px=ridge_px(args), splat_ridge_px=splat_ridge_px(args))
-    rig = read_rig(args.rig)
     start = time.perf_counter()
     result = fuse(captures[0], config, progress=True, rig=rig)
     write_reconstruction(result, args.output, overwrite=args.overwrite)

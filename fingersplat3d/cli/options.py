@@ -10,7 +10,7 @@ __all__ = ["add_registration_arguments", "photometric_config", "add_splat_argume
 
 
 def add_registration_arguments(parser) -> None:
-    from ..align.register import MATCHERS, RegistrationConfig
+    from ..align.registration_config import MATCHERS, RegistrationConfig
     from ..working_scale import RIDGE_PX
 
     parser.add_argument("--matcher", default="surface", choices=MATCHERS,

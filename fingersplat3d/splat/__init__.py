@@ -4,16 +4,33 @@ Importing this package (and the rasterizer) does not load Open3D; the Open3D ada
 fused point cloud into initial Gaussians lives in :mod:`fingersplat3d.splat.init` and is imported
 on demand.
 """
-from .camera_path import RigGeometry, arc_cameras, cameras_at_angles, rig_geometry
-from .gaussians import SH_C0, Gaussians, covariance_3d, rgb_to_sh, sh_to_rgb
-from .losses import masked_l1, photometric_loss, ssim, ssim_map
-from .project import Projection, project_gaussians
-from ..rotations import matrix_to_quaternion, normalize_quaternions, quaternion_to_matrix
-from .rasterize import RenderOutput, rasterize
-from .reference import reference_rasterize
+from __future__ import annotations
 
-__all__ = ["Gaussians", "SH_C0", "rgb_to_sh", "sh_to_rgb", "covariance_3d", "matrix_to_quaternion",
-           "normalize_quaternions", "quaternion_to_matrix",
-           "masked_l1", "photometric_loss", "ssim", "ssim_map",
-           "RigGeometry", "arc_cameras", "cameras_at_angles", "rig_geometry",
-           "Projection", "project_gaussians", "RenderOutput", "rasterize", "reference_rasterize"]
+import importlib
+
+_HOMES = {
+    "RigGeometry": ".camera_path", "arc_cameras": ".camera_path", "cameras_at_angles": ".camera_path",
+    "rig_geometry": ".camera_path",
+    "SH_C0": ".gaussians", "Gaussians": ".gaussians", "covariance_3d": ".gaussians", "rgb_to_sh": ".gaussians",
+    "sh_to_rgb": ".gaussians",
+    "masked_l1": ".losses", "photometric_loss": ".losses", "ssim": ".losses", "ssim_map": ".losses",
+    "Projection": ".project", "project_gaussians": ".project",
+    "matrix_to_quaternion": "..rotations", "normalize_quaternions": "..rotations", "quaternion_to_matrix": "..rotations",
+    "RenderOutput": ".rasterize", "rasterize": ".rasterize",
+    "reference_rasterize": ".reference",
+}
+__all__ = list(_HOMES)
+
+
+def __getattr__(name: str):
+    """The package's names, each loaded from its module when first asked for: a parser that reads
+    :mod:`fingersplat3d.splat.config`'s presets does not wait for torch."""
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOMES[name], __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_HOMES))

@@ -8,7 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 
-__all__ = ["SplatConfig", "PRESETS", "preset", "differences_from_preset", "DEFAULT_PRESET"]
+__all__ = ["SplatConfig", "PRESETS", "preset", "differences_from_preset", "DEFAULT_PRESET", "BACKENDS"]
+
+BACKENDS = ("auto", "numba", "torch", "gsplat")
+"""The rasterizer's backends (:func:`~fingersplat3d.splat.rasterize.rasterize`), here so that the settings, and the
+parsers built from them, are read without torch."""
 
 
 @dataclass(frozen=True)
@@ -136,8 +140,6 @@ class SplatConfig:
     """Seed of the view order and of densification."""
 
     def __post_init__(self) -> None:
-        from .rasterize import BACKENDS
-
         if self.rasterizer not in BACKENDS:
             raise ValueError(f"SplatConfig.rasterizer must be one of {', '.join(BACKENDS)}, got {self.rasterizer!r}")
         if self.iterations < 0:

@@ -17,13 +17,13 @@ import torch
 from torch import Tensor
 
 from .binning import bin_gaussians
+from .config import BACKENDS
 from .composite import EAGER_KERNELS, composite_tiles
 from .gsplat_backend import rasterize_gsplat, why_not_usable
 from .project import _check, _project
 
 __all__ = ["BACKENDS", "RenderOutput", "rasterize", "resolve_backend"]
 
-BACKENDS = ("auto", "numba", "torch", "gsplat")
 MIN_TRANSMITTANCE = 1e-4
 """Early termination of the ``numba`` backend: a pixel stops after the Gaussian that brings its
 transmittance below this (3DGS and gsplat stop before it), so what it leaves out weighs less than

@@ -29,39 +29,9 @@ import torch
 from ...sampling import sample_bilinear_torch
 from .alignment_problem import AlignmentProblem, InitialState, _lift, _project
 from .depth_field import FieldGrid
+from .settings import PhotometricConfig
 
 __all__ = ["PhotometricConfig", "PhotometricTerm", "photometric_refine", "refine_alignment", "facing_weight"]
-
-
-@dataclass(frozen=True)
-class PhotometricConfig:
-    """Settings of :func:`photometric_refine` (0 iterations: off)."""
-
-    iterations: int = 30
-    """L-BFGS iterations per round."""
-    rounds: int = 2
-    """Rounds; each decides the samples' visibility afresh."""
-    stride_periods: float = 0.5
-    """Sample spacing on each view's finger, in ridge periods."""
-    weight: float = 1.0
-    """Weight of the photometric mean against the alignment's own loss."""
-    robust: float = 1.0
-    """Cauchy scale of the texture difference (the textures have unit local RMS)."""
-    fine_knots: float = 24.0
-    """Knot intervals of the finer depth field across the finger's short side (0: none)."""
-    fine_smoothness: float = 0.05
-    """Bending penalty of the finer fields."""
-    fine_prior: float = 1e-3
-    """Pull of the finer fields toward 0 (beyond the samples a bent field would otherwise run on as a ramp)."""
-    poses: bool = False
-    """Refine the poses, focal, scales and relief too (after the surface, each round). Off: measured on the real
-    dev captures, the turns moved by less than 0.05 deg (the verified matches already pin them) at 1.5 s more."""
-    pose_iterations: int = 20
-    """L-BFGS iterations of the pose block per round."""
-    min_views: int = 3
-    """Views a capture needs for the stage. With two, ridges that run along the one epipolar direction leave
-    the depth free to take up what is left of the pose error (synthetic two-view ring captures: whole-view
-    depth error, median of 3 seeds, 0.087 -> 0.104 mm)."""
 
 
 @dataclass(frozen=True, eq=False)
