@@ -346,6 +346,10 @@ def test_fs3d_print_refuses_bad_arguments(tmp_path, capsys):
     assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--ppi", "0"]) == EXIT_INPUT
     assert main(["print", str(SAMPLE), "-o", str(tmp_path / "o"), "--px-per-mm", "nan"]) == EXIT_INPUT
     assert not (tmp_path / "o").exists()
+    capsys.readouterr()
+    # A wrong path is bad input before any print is made (it had been a row of prints.csv and exit 4).
+    assert main(["print", str(SAMPLE), str(tmp_path / "no_such.png"), "-o", str(tmp_path / "o")]) == EXIT_INPUT
+    assert "no_such.png: no such file or folder" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 def test_ridge_coherence_tells_ridges_from_noise():

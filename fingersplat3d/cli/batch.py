@@ -41,14 +41,15 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..batch.run import run_batch
-    from ..batch.task import BatchOptions
     from ..io.jobs import list_jobs
-    from ..pipeline import refuse_focal_with_rig
 
-    jobs = list_jobs(args.dataset, args.select)
+    jobs = list_jobs(args.dataset, args.select)  # a wrong path or selection is said before torch loads (~2 s)
     if args.device not in ("cpu", "cuda") and not args.device.startswith("cuda:"):
         raise InputError(f"--device {args.device!r}: use cpu or cuda")
+    from ..batch.run import run_batch
+    from ..batch.task import BatchOptions
+    from ..pipeline import refuse_focal_with_rig
+
     refuse_focal_with_rig(args.focal_px, args.rig)
     config = replace(fuse_config(args), device=args.device, focal_px=args.focal_px)
     options = BatchOptions(fuse=config, render=0 if args.no_splat else args.render_count, rig=read_rig(args.rig),

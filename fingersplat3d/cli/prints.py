@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import EXIT_INCOMPLETE
+from ..errors import EXIT_INCOMPLETE, InputError
 from ..prints.learned import ENHANCERS
 from .types import PX_PER_MM, number
 
@@ -60,6 +60,9 @@ def _names(inputs: list[Path]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    missing = [source for source in args.inputs if not source.exists()]
+    if missing:  # a wrong path is bad input, said before any work; an input that is there but gives no print is a row
+        raise InputError(f"{missing[0]}: no such file or folder" + (f" (and {len(missing) - 1} more inputs)" if len(missing) > 1 else ""))
     from tqdm import tqdm
 
     from ..atomic import atomic_dir, check_free

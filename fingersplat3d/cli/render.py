@@ -36,13 +36,6 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..device import resolve_device
-    from ..io.cameras import read_cameras
-    from ..io.gaussians_ply import read_gaussians_ply
-    from ..io.renders import write_renders
-    from ..splat.camera_path import cameras_at_angles
-    from ..splat.novel import arc_views, render_views
-
     folder = args.reconstruction
     for needed in ("gaussians.ply", "cameras.json"):
         if not (folder / needed).is_file():
@@ -50,6 +43,13 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{folder / needed}: missing; 'fs3d render' needs a reconstruction folder from 'fs3d fuse'{hint}")
     output = args.output or folder / "renders"
     check_free(output, args.overwrite)
+    from ..device import resolve_device  # torch from here on (~2 s): a wrong folder is said without it
+    from ..io.cameras import read_cameras
+    from ..io.gaussians_ply import read_gaussians_ply
+    from ..io.renders import write_renders
+    from ..splat.camera_path import cameras_at_angles
+    from ..splat.novel import arc_views, render_views
+
     cameras = read_cameras(folder / "cameras.json")
     gaussians = read_gaussians_ply(folder / "gaussians.ply").to(resolve_device("auto"))
     inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]

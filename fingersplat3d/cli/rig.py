@@ -40,17 +40,18 @@ def add(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..align.solve.global_opt import GlobalAlignConfig
-    from ..align.solve.rig import calibrate_rig
-    from ..batch.engine import ray_map
     from ..io.jobs import list_jobs
-    from ..io.rig import write_rig
 
     check_free(args.output, args.overwrite)
-    jobs = list_jobs(args.dataset, args.select)
+    jobs = list_jobs(args.dataset, args.select)  # a wrong path or selection is said before torch loads (~2 s)
     if len(jobs) < 2:  # one (list_jobs refuses none), said before it is registered: nothing could make up the second
         selected = f" ({args.select})" if args.select else ""
         raise InputError(f"1 capture in {', '.join(map(str, args.dataset))}{selected}; a rig needs at least 2")
+    from ..align.solve.rig import calibrate_rig
+    from ..align.solve.settings import GlobalAlignConfig
+    from ..batch.engine import ray_map
+    from ..io.rig import write_rig
+
     config = fuse_config(args)
     captures, failures = [], {}
 
