@@ -18,13 +18,14 @@ from .align.solve.global_opt import GlobalAlignment
 from .scene import Capture
 from .segment.silhouette import TIP_BASES
 
-__all__ = ["MAX_RESIDUAL_PX", "MAX_TURN_UNCERTAINTY_DEG", "MAX_TURN_SENSITIVITY_DEG", "MAX_TURN_SHORTFALL_DEG",
+__all__ = ["MAX_RESIDUAL_PX", "MAX_TURN_UNCERTAINTY_DEG", "MAX_TURN_SENSITIVITY_DEG", "MAX_TURN_SHORTFALL_DEG", "AT_BOUND_DEG",
            "NO_TIP_WARNING", "NO_TIP_SENSITIVITY_DEG", "alignment_status", "warn", "warn_without_tip"]
 
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
 MAX_TURN_SENSITIVITY_DEG = 1.5  # a pair turn that moves more than this under the focal probe is warned about
 MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
+AT_BOUND_DEG = 1.0  # two views turned less than this beyond their least turn are held there by the bound, not the photos
 
 
 def warn(report: dict, message: str) -> None:
@@ -134,7 +135,7 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
     if len(placed) < 2:
         return
     bounds = least_turns_deg([view.mask for view in capture.views], alignment.depths, alignment.focals)
-    least, short = {}, []
+    least, short, held = {}, [], {}
     for i, a in enumerate(placed):
         for b in placed[i + 1:]:
             if not np.isfinite(bounds[a, b]):
@@ -144,7 +145,15 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
             turn = float(rotation_angle_deg(alignment.cam_to_world[a][:3, :3], alignment.cam_to_world[b][:3, :3]))
             if bounds[a, b] - turn > MAX_TURN_SHORTFALL_DEG:
                 short.append(f"{pair} ({turn:.0f}°, at least {bounds[a, b]:.0f}°)")
+            elif len(placed) == 2 and turn - bounds[a, b] < AT_BOUND_DEG:
+                held[pair] = turn
     status["turn_at_least_deg"] = least
+    if held:  # the hinge rows of two views (GlobalAlignConfig.two_view_turn_bound_weight) hold it: its curvature says nothing
+        status["turn_held_at_bound"] = list(held)
+        turns = ", ".join(f"{pair} ({turn:.0f}°)" for pair, turn in held.items())
+        warn(report, f"the turn between {turns} is held at the least turn the views' silhouette widths allow: the photos "
+             "alone would turn it less, against the prior's rounder section, and it may be larger still (another "
+             "group's flat finger, measured: 1.7-9.4° short); a third view fixes it")
     if short:
         warn(report, "the turn between " + ", ".join(short) + " is smaller than the views' silhouette widths allow "
              "if the widest view faces the finger's widest extent (turning about a finger cannot narrow it faster "

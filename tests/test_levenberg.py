@@ -319,3 +319,20 @@ def test_the_short_end_of_a_flat_focal_valley_is_where_the_loss_meets_the_tolera
     valley(lambda share: 2.0 * np.log(share) ** 2 if share in (SHORT_END_STEP, SHORT_END_STEP ** 2, SHORT_END_STEP ** 3)
            else float("nan"))
     assert short_end(None, [], 1.0, [], GlobalAlignConfig(), 0.10)[1] == pytest.approx(SHORT_END_STEP ** 2)
+
+
+def test_two_views_are_held_to_their_least_turns_and_three_are_not(capture):
+    """The hinge rows of least turns: on where two views are aligned (their bas-relief valley open, the relief from
+    the prior's section), off where three are (``GlobalAlignConfig.two_view_turn_bound_weight``, ``turn_bound_weight``)."""
+    from fingersplat3d.eval.poses import rotation_angle_deg
+
+    config = GlobalAlignConfig()
+    bounds = np.full((3, 3), np.nan)
+    bounds[0, 1] = bounds[1, 0] = np.radians(52.0)  # the true turn is 45
+    problem, pairs, depths, focal = _problem(capture, config, min_turns=bounds)
+    assert problem.turn_bound_weight == config.turn_bound_weight == 0.0
+    three = global_align(depths, focal, pairs, config, min_turns=bounds)
+    two = global_align(depths, focal, pairs[:1], config, min_turns=bounds)  # views 0 and 1 alone
+    assert all(three.aligned) and two.aligned == [True, True, False]
+    assert rotation_angle_deg(three.cam_to_world[0][:3, :3], three.cam_to_world[1][:3, :3]) < 48.0
+    assert rotation_angle_deg(two.cam_to_world[0][:3, :3], two.cam_to_world[1][:3, :3]) > 51.0

@@ -65,7 +65,8 @@ def describe_reconstruction(folder: Path) -> dict:
                 continue
             turn = rotation_angle_deg(cameras.cameras[b].rotation @ cameras.cameras[a].rotation.T, np.eye(3))
             pairs.append({"pair": f"{a}-{b}", "turn_deg": round(float(turn), 2),
-                          "uncertainty_deg": uncertainty.get(f"{a}-{b}"), "moves_with_focal_deg": sensitivity.get(f"{a}-{b}")})
+                          "uncertainty_deg": uncertainty.get(f"{a}-{b}"), "moves_with_focal_deg": sensitivity.get(f"{a}-{b}"),
+                          "held_at_least_turn": f"{a}-{b}" in (alignment.get("turn_held_at_bound") or [])})
     splat = report.get("splat") if isinstance(report.get("splat"), dict) else {}
     shading = splat.get("shading") if isinstance(splat.get("shading"), dict) else {}
     described = {"path": str(folder), "kind": "reconstruction folder", "mode": alignment.get("mode"),
@@ -94,7 +95,8 @@ def _print_reconstruction(described: dict) -> None:
         sure = "" if pair["uncertainty_deg"] is None else f", ±{pair['uncertainty_deg']:.2f}°"
         off = "10 % off" if described.get("focal_held_by_photos") is not False else "held shorter"
         moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal {off}"
-        print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + sure + moves)
+        held = ", held at the least turn its silhouettes allow (it may be larger)" if pair.get("held_at_least_turn") else ""
+        print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + sure + moves + held)
     for warning in described["warnings"]:
         print(f"  warning: {warning}")
 

@@ -250,7 +250,7 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
                                field_smoothness=config.field_smoothness if closed else config.two_view_field_smoothness,
                                field_prior=config.field_prior, focal_prior=config.focal_prior,
                                shared_relief=config.shared_relief, min_turns=min_turns,
-                               turn_bound_weight=config.turn_bound_weight,
+                               turn_bound_weight=config.turn_bound_weight if closed else config.two_view_turn_bound_weight,
                                pivot=_pivot(initial, root) if config.pivot_poses and closed else None)
     return problem, data
 

@@ -73,6 +73,15 @@ class GlobalAlignConfig:
     held the unfinished fit's turns up on flat fingers; with the rounds run to their end they only bind where they
     are wrong, when the capture's widest view is oblique to a flat section (another group's crops -45 / -18 / 14:
     bound 34 degrees, true 27; with the hinges 6.7 degrees off, without 0.1). Real and synthetic tables unchanged."""
+    two_view_turn_bound_weight: float = 1e3
+    """The same hinge rows with two views aligned. Their bas-relief valley is open, so the relief the turn trades
+    against comes from the pointmap prior's section (0.95 as deep as wide), and on a flatter finger the turn comes out
+    too small; the narrower view's silhouette then says how far it must at least be turned from the wider one. Measured
+    on another group's renders of a flat finger (its nine rolls' silhouettes fit an ellipse 0.39 as deep as wide within
+    0.6 px), ten pairs 18-92 degrees apart, focal fitted (docs/measurements.md, stop 81): error median 17.1 -> 8.8 degrees;
+    the pairs with the pad-facing view 12.3 -> 1.7, 17.2 -> 3.8, 21.3 -> 8.1 degrees, those of two oblique views as
+    before (the wider of two oblique views gives no bound that holds). The bound never binds on the real dev pairs nor on
+    the synthetic ones (their sections 0.74-0.94 as deep as wide)."""
     shared_relief: bool = True
     """One relief scale for all views (they see one finger) instead of one per view. Measured (README,
     5 seeds): rotation error median on synthetic ``cfpose`` 3.93 -> 3.35 deg, ``uwa`` 1.99 -> 2.01 deg;
