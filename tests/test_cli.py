@@ -38,7 +38,7 @@ def test_the_parser_builds_every_command_in_full_or_only_the_one_run():
 def test_every_command_explains_itself_and_a_wrong_path_is_said_without_loading_torch(tmp_path):
     # The parsers' defaults live in torch-free settings modules (align/registration_config.py, align/solve/settings.py,
     # splat/config.py), and the commands check their paths before loading torch: 'fs3d fuse --help' and a wrong path's
-    # one sentence took 2.2-2.5 s on 2 cores, most of it torch.
+    # one sentence took 1.8-2.7 s on 2 cores, most of it torch (now 0.4-0.6 s).
     probe = ("import sys\nfrom fingersplat3d.cli.main import build_parser, main\nbuild_parser()\n"
              "missing, out = sys.argv[1], sys.argv[2]\n"
              "codes = [main(['fuse', missing, '-o', out]), main(['batch', missing, '-o', out]),\n"
