@@ -37,18 +37,20 @@ def test_the_parser_builds_every_command_in_full_or_only_the_one_run():
 
 def test_every_command_explains_itself_and_a_wrong_path_is_said_without_loading_torch(tmp_path):
     # The parsers' defaults live in torch-free settings modules (align/registration_config.py, align/solve/settings.py,
-    # splat/config.py), and the commands check their paths before loading torch: 'fs3d fuse --help' and a wrong path's
-    # one sentence took 1.8-2.7 s on 2 cores, most of it torch (now 0.4-0.6 s).
+    # splat/config.py), and the commands check their paths before loading torch (fuse, batch, rig calibrate, render,
+    # print, eval depth, eval quality): 'fs3d fuse --help' and a wrong path's one sentence took 1.8-2.7 s on 2 cores,
+    # most of it torch (now 0.2-0.6 s).
     probe = ("import sys\nfrom fingersplat3d.cli.main import build_parser, main\nbuild_parser()\n"
              "missing, out = sys.argv[1], sys.argv[2]\n"
              "codes = [main(['fuse', missing, '-o', out]), main(['batch', missing, '-o', out]),\n"
              "         main(['rig', 'calibrate', missing, '-o', out + '.json']), main(['render', missing]),\n"
-             "         main(['print', missing, '-o', out])]\n"
+             "         main(['print', missing, '-o', out]), main(['eval', 'depth', missing, '-o', out]),\n"
+             "         main(['eval', 'quality', missing, '-o', out, '--no-nfiq2'])]\n"
              "print(*codes, 'torch' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", probe, str(tmp_path / "no_such_photo.png"), str(tmp_path / "out")],
                           capture_output=True, text=True, check=True)
-    assert done.stdout.split() == ["2", "2", "2", "2", "2", "False"]
-    assert done.stderr.count("no_such_photo.png") == 5 and list(tmp_path.iterdir()) == []
+    assert done.stdout.split() == ["2"] * 7 + ["False"]
+    assert done.stderr.count("no_such_photo.png") == 7 and list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("command", ["synth", "info", "preview"])

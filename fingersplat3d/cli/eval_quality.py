@@ -39,14 +39,14 @@ def add(actions) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.no_nfiq2:
+        nbis_needed("fs3d eval quality (or give --no-nfiq2)")
+    check_free(args.output, args.overwrite)
+    captures = named_captures(args.inputs)  # a wrong path is said before torch loads (~2 s)
     from ..experiments.quality import run_quality_evaluation
     from ..pipeline import FuseConfig
     from ..splat.config import preset
 
-    if not args.no_nfiq2:
-        nbis_needed("fs3d eval quality (or give --no-nfiq2)")
-    check_free(args.output, args.overwrite)
-    captures = named_captures(args.inputs)
     config = FuseConfig(splat=preset(args.splat_preset, iterations=args.splat_iterations), device=args.device)
     with atomic_dir(args.output, overwrite=args.overwrite) as folder:
         rows = run_quality_evaluation(captures, folder, config, nfiq2=not args.no_nfiq2)
