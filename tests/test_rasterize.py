@@ -192,6 +192,18 @@ def test_importing_the_rasterizer_does_not_load_open3d():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_the_splat_package_loads_its_names_on_first_use_and_rasterize_stays_the_function():
+    """Its settings are read without torch (the parsers' defaults); importing the rasterizer's module first does not turn
+    the package's ``rasterize`` into that module."""
+    code = ("import sys, types, fingersplat3d.splat.config\n"
+            "assert 'torch' not in sys.modules, 'the settings loaded torch'\n"
+            "import fingersplat3d.splat.rasterize\n"
+            "from fingersplat3d.splat import rasterize, Gaussians, ssim\n"
+            "assert callable(rasterize) and not isinstance(rasterize, types.ModuleType)\n"
+            "assert rasterize is sys.modules['fingersplat3d.splat.rasterize'].rasterize")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 @pytest.mark.slow
 def test_compiled_path_matches_the_eager_path():
     # torch.compile kernels (first call compiles for tens of seconds): same outputs and gradients.

@@ -7,6 +7,8 @@ on demand.
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 
 _HOMES = {
     "RigGeometry": ".camera_path", "arc_cameras": ".camera_path", "cameras_at_angles": ".camera_path",
@@ -34,3 +36,17 @@ def __getattr__(name: str):
 
 def __dir__():
     return sorted(set(globals()) | set(_HOMES))
+
+
+class _Package(types.ModuleType):
+    """The import system binds each submodule on its package once it is loaded; where a submodule has the name of the
+    function the package gives (``rasterize``), the function keeps the name, as when the package imported it eagerly."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if isinstance(value, types.ModuleType) and _HOMES.get(name, "").lstrip(".") == name:
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
+
