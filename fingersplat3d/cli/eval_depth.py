@@ -33,7 +33,7 @@ def add(actions) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    missing = [path for path in [*args.inputs, *([args.truth] if args.truth is not None else [])] if not path.exists()]
+    missing = [path for path in args.inputs if not path.exists()]
     if missing:  # said before torch loads (~2 s)
         raise InputError(f"{missing[0]}: file not found")
     from ..experiments.depth import capture_cases, polyu_cases, run_depth_evaluation
