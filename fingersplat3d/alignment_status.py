@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .align.solve.global_opt import GlobalAlignment
+from .align.solve.global_opt import PIVOT_MIN_VIEWS, GlobalAlignment
 from .scene import Capture
 from .segment.silhouette import TIP_BASES
 
@@ -145,7 +145,7 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
             turn = float(rotation_angle_deg(alignment.cam_to_world[a][:3, :3], alignment.cam_to_world[b][:3, :3]))
             if bounds[a, b] - turn > MAX_TURN_SHORTFALL_DEG:
                 short.append(f"{pair} ({turn:.0f}°, at least {bounds[a, b]:.0f}°)")
-            elif len(placed) == 2 and turn - bounds[a, b] < AT_BOUND_DEG:
+            elif len(placed) < PIVOT_MIN_VIEWS and turn - bounds[a, b] < AT_BOUND_DEG:  # the hinges' own condition
                 held[pair] = turn
     status["turn_at_least_deg"] = least
     if held:  # the hinge rows of two views (GlobalAlignConfig.two_view_turn_bound_weight) hold it: its curvature says nothing

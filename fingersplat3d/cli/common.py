@@ -1,4 +1,4 @@
-"""Helpers of several commands: exit statuses of experiments, NIST tools present, captures named from inputs."""
+"""Helpers of several commands: exit statuses of experiments, NIST tools present, inputs there, captures named from inputs."""
 from __future__ import annotations
 
 import sys
@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..errors import EXIT_INCOMPLETE, InputError
 
-__all__ = ["finished", "nbis_needed", "named_captures"]
+__all__ = ["finished", "nbis_needed", "refuse_missing", "named_captures"]
 
 
 def finished(command: str, failed: int, total: int, what: str, output: Path) -> int:
@@ -22,6 +22,15 @@ def nbis_needed(command: str) -> None:
 
     if not nbis_available():
         raise InputError(f"'{command}' needs NIST's tools from the nbis-py package: pip install nbis-py==0.1.3")
+
+
+def refuse_missing(paths: list[Path]) -> None:
+    """One sentence naming the first of ``paths`` that is not there (and how many more are not): bad input, said before a
+    command loads torch or makes anything."""
+    missing = [path for path in paths if not Path(path).exists()]
+    if missing:
+        more = f" (and {len(missing) - 1} more inputs)" if len(missing) > 1 else ""
+        raise InputError(f"{missing[0]}: no such file or folder{more}")
 
 
 def named_captures(inputs: list[Path]) -> list[tuple[str, object]]:

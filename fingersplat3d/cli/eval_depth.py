@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
 from ..errors import InputError
-from .common import finished
+from .common import finished, refuse_missing
 
 __all__ = ["add", "run"]
 
@@ -33,9 +33,7 @@ def add(actions) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    missing = [path for path in args.inputs if not path.exists()]
-    if missing:  # said before torch loads (~2 s)
-        raise InputError(f"{missing[0]}: file not found")
+    refuse_missing(args.inputs)  # said before torch loads (~2 s)
     from ..experiments.depth import capture_cases, polyu_cases, run_depth_evaluation
     from ..pipeline import FuseConfig
 

@@ -5,8 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import EXIT_INCOMPLETE, InputError
+from ..errors import EXIT_INCOMPLETE
 from ..prints.learned import ENHANCERS
+from .common import refuse_missing
 from .types import PX_PER_MM, number
 
 __all__ = ["add", "run"]
@@ -60,9 +61,7 @@ def _names(inputs: list[Path]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    missing = [source for source in args.inputs if not source.exists()]
-    if missing:  # a wrong path is bad input, said before any work; an input that is there but gives no print is a row
-        raise InputError(f"{missing[0]}: no such file or folder" + (f" (and {len(missing) - 1} more inputs)" if len(missing) > 1 else ""))
+    refuse_missing(args.inputs)  # a wrong path is bad input; an input that is there but gives no print is a row
     from tqdm import tqdm
 
     from ..atomic import atomic_dir, check_free

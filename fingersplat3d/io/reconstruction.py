@@ -124,7 +124,7 @@ def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int =
     margin = max(4, height // 40)
     font, font_scale = cv2.FONT_HERSHEY_SIMPLEX, max(0.4, height / 900)
     thickness = max(1, round(font_scale * 1.5))
-    if valid.any():
+    if span is not None:
         near, far = span
         decimals = int(np.clip(2 - math.floor(math.log10(far - near)), 0, 6)) if far > near else 2
         labels = [_label(near, decimals, units), _label((near + far) / 2, decimals, units), _label(far, decimals, units)]
@@ -136,7 +136,7 @@ def depth_legend_picture(depth: np.ndarray, units: str = "mm", min_height: int =
     panel = np.full((height, 3 * margin + bar_width + text_width, 3), 32, np.uint8)
     top, bottom = margin + text_height // 2, height - margin - text_height // 2
     text_x = 2 * margin + bar_width
-    if valid.any():
+    if span is not None:
         # The bar goes through the same colour map as the picture: near (hot) at the top.
         column = np.linspace(near, far, max(2, bottom - top))[:, None].repeat(bar_width, axis=1)
         panel[top:top + len(column), margin:margin + bar_width] = depth_colormap(column)
