@@ -1,6 +1,6 @@
 """Degraded copies of a folder of photos, for registration under worse light, noise and size than the dev captures.
 
-    python3 tools/degrade_photos.py SRC OUT --kind noise|small|half|dark|faint|hazy [--seed 0]
+    python3 tools/degrade_photos.py SRC OUT --kind noise|small|half|dark|faint|hazy|thin|thick [--seed 0]
     python3 tools/bench_real.py --data OUT
 
 Every image of SRC (its own files, sorted) is written to OUT under its own name: ``noise`` adds Gaussian noise of
@@ -39,14 +39,26 @@ def degrade(image: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.
         mean = pixels.mean()
         pixels = mean + contrast * (pixels - mean) + rng.normal(0, noise, pixels.shape)
         return np.clip(pixels, 0, 255).astype(np.uint8), quality
+    if kind in ("thin", "thick"):
+        return stretched_across(image, 0.8 if kind == "thin" else 1.25), 95
     return np.clip(pixels * 0.3 + rng.normal(0, 3, pixels.shape), 0, 255).astype(np.uint8), 90
+
+
+def stretched_across(image: np.ndarray, factor: float) -> np.ndarray:
+    """``image`` scaled by ``factor`` across its long side about its centre, its size kept (edges mirrored)."""
+    height, width = image.shape[:2]
+    centre = ((width - 1) / 2, (height - 1) / 2)
+    sx, sy = (1.0, factor) if width >= height else (factor, 1.0)
+    warp = np.array([[sx, 0, centre[0] * (1 - sx)], [0, sy, centre[1] * (1 - sy)]])
+    return cv2.warpAffine(image, warp, (width, height), flags=cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC,
+                          borderMode=cv2.BORDER_REFLECT_101)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("src", type=Path)
     parser.add_argument("out", type=Path)
-    parser.add_argument("--kind", choices=("noise", "small", "half", "dark", "faint", "hazy"), required=True)
+    parser.add_argument("--kind", choices=("noise", "small", "half", "dark", "faint", "hazy", "thin", "thick"), required=True)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     files = sorted(p for p in args.src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if args.src.is_dir() else []
