@@ -1,6 +1,7 @@
 """Degraded copies of a folder of photos, for registration under worse light, noise and size than the dev captures.
 
     python3 tools/degrade_photos.py SRC OUT --kind noise|small|half|dark|faint|hazy|thin|thick [--seed 0]
+                                    [--finger-axis auto|horizontal|vertical]
     python3 tools/bench_real.py --data OUT
 
 Every image of SRC (its own files, sorted) is written to OUT under its own name: ``noise`` adds Gaussian noise of
@@ -9,7 +10,13 @@ synthetic tables); ``dark`` keeps
 0.3x the light with noise of sigma 3 (JPEG 90); ``faint`` blurs by sigma 1 px, halves the contrast about the image's
 mean and adds noise of sigma 4 (JPEG 95); ``hazy`` blurs by 1.3 px, keeps 0.4 of the contrast about the mean (a dark
 background lifted to a third of the skin's level, as under haze or glare) and adds noise of sigma 5 (JPEG 90). Noise draws from ``numpy.random.default_rng(seed)`` in file order.
-The measured rows are in docs/measurements.md (the same captures mirrored, turned or degraded).
+``thin`` and ``thick`` stretch each photo across the finger by 0.8x / 1.25x about its centre (``--finger-axis``: the
+finger along the photo's rows or columns; ``auto``, along its long side, as in a rig's frames, UWA's included), the
+size kept (JPEG 95): exactly the photos of a finger scaled by that factor about its axis, the cameras moved out with it
+and their focal scaled by it, when each camera's rows (columns) run along the finger, as a ring's do -- the relative
+rotations are the original's, the focal ``factor`` times its own (with ``y = f Y / Z``, scaling ``Y``, ``Z`` and ``f``
+by ``s`` scales ``y`` by ``s`` and keeps ``x = f X / Z``).
+The measured rows are in docs/measurements.md (the same captures mirrored, turned or degraded; thinner and thicker).
 """
 from __future__ import annotations
 
@@ -25,7 +32,7 @@ from fingersplat3d.errors import run_script
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 
 
-def degrade(image: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+def degrade(image: np.ndarray, kind: str, rng: np.random.Generator, finger_axis: str = "auto") -> tuple[np.ndarray, int]:
     """The degraded 8-bit image and the JPEG quality to save it at."""
     pixels = image.astype(np.float32)
     if kind == "noise":
@@ -40,15 +47,17 @@ def degrade(image: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.
         pixels = mean + contrast * (pixels - mean) + rng.normal(0, noise, pixels.shape)
         return np.clip(pixels, 0, 255).astype(np.uint8), quality
     if kind in ("thin", "thick"):
-        return stretched_across(image, 0.8 if kind == "thin" else 1.25), 95
+        return stretched_across(image, 0.8 if kind == "thin" else 1.25, finger_axis), 95
     return np.clip(pixels * 0.3 + rng.normal(0, 3, pixels.shape), 0, 255).astype(np.uint8), 90
 
 
-def stretched_across(image: np.ndarray, factor: float) -> np.ndarray:
-    """``image`` scaled by ``factor`` across its long side about its centre, its size kept (edges mirrored)."""
+def stretched_across(image: np.ndarray, factor: float, finger_axis: str = "auto") -> np.ndarray:
+    """``image`` scaled by ``factor`` across the finger about its centre, its size kept (edges mirrored); the finger
+    along the rows (``horizontal``), the columns (``vertical``) or the long side (``auto``)."""
     height, width = image.shape[:2]
     centre = ((width - 1) / 2, (height - 1) / 2)
-    sx, sy = (1.0, factor) if width >= height else (factor, 1.0)
+    along_rows = finger_axis == "horizontal" or (finger_axis == "auto" and width >= height)
+    sx, sy = (1.0, factor) if along_rows else (factor, 1.0)
     warp = np.array([[sx, 0, centre[0] * (1 - sx)], [0, sy, centre[1] * (1 - sy)]])
     return cv2.warpAffine(image, warp, (width, height), flags=cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC,
                           borderMode=cv2.BORDER_REFLECT_101)
@@ -60,6 +69,8 @@ def main() -> int:
     parser.add_argument("out", type=Path)
     parser.add_argument("--kind", choices=("noise", "small", "half", "dark", "faint", "hazy", "thin", "thick"), required=True)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--finger-axis", choices=("auto", "horizontal", "vertical"), default="auto",
+                        help="thin, thick: the finger along the photos' rows, columns, or long side (auto)")
     args = parser.parse_args()
     files = sorted(p for p in args.src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if args.src.is_dir() else []
     if not files:
@@ -72,7 +83,7 @@ def main() -> int:
         if image is None:
             print(f"degrade_photos: {path}: not a readable image", file=sys.stderr)
             return 2
-        degraded, quality = degrade(image, args.kind, rng)
+        degraded, quality = degrade(image, args.kind, rng, args.finger_axis)
         cv2.imwrite(str(args.out / (path.stem + ".jpg")), degraded, [cv2.IMWRITE_JPEG_QUALITY, quality])
     print(f"wrote {len(files)} images to {args.out}")
     return 0
