@@ -371,27 +371,8 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     settling = rig is None and not config.global_align.optimize_focal
     while rounds < limit:
         rounds += 1
-        refined, disagreed, agreements = [], set(), {}
-        for a, b in pairs:
-            if not (alignment.aligned[a] and alignment.aligned[b]):
-                continue
-            say(f"guided round {rounds} {views[a].name}-{views[b].name}")
-            matches, verified, agreement = _through_model(prepared, alignment, a, b, config)
-            record = records[(a, b)]
-            record["matches"].append(len(verified))
-            record.setdefault("agreement", []).append(round(agreement, 3) if matches.tried else None)
-            agreements[(a, b)] = agreement if matches.tried else 0.0
-            if matches.tried and agreement < config.min_agreement:
-                disagreed.add((a, b))
-                record.update(ok=False, reason=f"the views agree at {agreement:.0%} of the {matches.tried} points the model "
-                                               f"puts on both (views of one finger: {config.min_agreement:.1%} or more); "
-                                               f"they may show different fingers")
-            elif len(verified) < config.min_matches:
-                record.update(ok=False, reason=f"only {len(verified)} of {len(matches)} matches through the 3D model agree "
-                                               f"on the epipolar geometry; {config.min_matches} are needed")
-            else:
-                refined.append(_pair_correspondences(a, b, verified, np.eye(4), cap))
-                record.update(ok=True, reason="")
+        refined, disagreed, agreements = _guided_pass(views, prepared, alignment, pairs, records, config, cap,
+                                                      lambda pair: say(f"guided round {rounds} {pair}"))
         if check_weak:
             check_weak = False
             replaced = _weak_views_replaced(alignment, agreements, registered, pairs, records, prepared, charts,
@@ -435,26 +416,63 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
         alignment, photometric = refine_alignment(alignment, depths, focals, fitted, config.global_align, prepared.textures,
                                                   prepared.masks, prepared.period, config.photometric, min_turns)
     if rig is None and config.global_align.solver == "lm":
-        solved_config = config.global_align  # what the reported alignment was solved with
-        if sum(alignment.aligned) >= 2:
-            say("how sure: probing the focal")
-            probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
-            if probe is not None:
-                summary = probe.summary()
-                if not probe.held and config.short_end_tolerance > 0 and sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
-                    say("the focal not held: its short end")
-                    shorter = short_end(alignment, depths, focals, solved_with[0], config.global_align,
-                                        config.short_end_tolerance, solved_with[1])
-                    if shorter is not None:
-                        summary["taken_share"] = round(shorter[1], 3)
-                        alignment, solved_config = shorter[0], replace(config.global_align, optimize_focal=False)
-                alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=summary)
-        # The curvature once, of the alignment reported (the probes neither read nor change it).
-        alignment = replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
-                                                                                solved_config, solved_with[1]))
+        alignment = _how_sure(alignment, depths, focals, solved_with, config, say)
     return Registration(alignment, [records[pair] for pair in pairs], prepared.period, rounds, fitted, tips=tips,
                         photometric=photometric, pointmaps=list(pointmaps), redrawn_at_px=redrawn_at, contours=contours,
                         turn_changes_deg=turn_changes)
+
+
+def _guided_pass(views: Sequence[View], prepared: _Prepared, alignment: GlobalAlignment, pairs, records: dict,
+                 config: RegistrationConfig, cap: int, say) -> tuple[list[PairCorrespondences], set, dict]:
+    """One guided round: each pair of placed views matched through the model. The pairs' correspondences that hold,
+    the pairs whose views agree too little to be one finger's, and each pair's agreement (0 where nothing was tried);
+    each pair's record told its outcome. ``say``: told each pair's names."""
+    refined, disagreed, agreements = [], set(), {}
+    for a, b in pairs:
+        if not (alignment.aligned[a] and alignment.aligned[b]):
+            continue
+        say(f"{views[a].name}-{views[b].name}")
+        matches, verified, agreement = _through_model(prepared, alignment, a, b, config)
+        record = records[(a, b)]
+        record["matches"].append(len(verified))
+        record.setdefault("agreement", []).append(round(agreement, 3) if matches.tried else None)
+        agreements[(a, b)] = agreement if matches.tried else 0.0
+        if matches.tried and agreement < config.min_agreement:
+            disagreed.add((a, b))
+            record.update(ok=False, reason=f"the views agree at {agreement:.0%} of the {matches.tried} points the model "
+                                           f"puts on both (views of one finger: {config.min_agreement:.1%} or more); "
+                                           f"they may show different fingers")
+        elif len(verified) < config.min_matches:
+            record.update(ok=False, reason=f"only {len(verified)} of {len(matches)} matches through the 3D model agree "
+                                           f"on the epipolar geometry; {config.min_matches} are needed")
+        else:
+            refined.append(_pair_correspondences(a, b, verified, np.eye(4), cap))
+            record.update(ok=True, reason="")
+    return refined, disagreed, agreements
+
+
+def _how_sure(alignment: GlobalAlignment, depths, focals, solved_with: tuple, config: RegistrationConfig,
+              say) -> GlobalAlignment:
+    """The alignment with how sure it is: the focal probe (and, where the photos do not hold the focal and three views
+    or more are aligned, the alignment re-fitted at the short end of its valley), then the turns' uncertainty from the
+    curvature of the alignment reported. ``solved_with``: the correspondences and least turns it was fitted to."""
+    solved_config = config.global_align  # what the reported alignment was solved with
+    if sum(alignment.aligned) >= 2:
+        say("how sure: probing the focal")
+        probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
+        if probe is not None:
+            summary = probe.summary()
+            if not probe.held and config.short_end_tolerance > 0 and sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
+                say("the focal not held: its short end")
+                shorter = short_end(alignment, depths, focals, solved_with[0], config.global_align,
+                                    config.short_end_tolerance, solved_with[1])
+                if shorter is not None:
+                    summary["taken_share"] = round(shorter[1], 3)
+                    alignment, solved_config = shorter[0], replace(config.global_align, optimize_focal=False)
+            alignment = replace(alignment, turn_sensitivity_deg=probe.moves, focal_probe=summary)
+    # The curvature once, of the alignment reported (the probes neither read nor change it).
+    return replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
+                                                                       solved_config, solved_with[1]))
 
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
