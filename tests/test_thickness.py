@@ -1,29 +1,17 @@
-"""A finger thicker or thinner than the ones the project was tuned on: the same turns, the focal scaled with it.
-
-Photos stretched across the finger by ``s`` about their centres are exactly the photos of the finger scaled by ``s``
-about its axis, taken by cameras moved out with it whose focal is ``s`` times theirs, wherever each camera's rows run
-along the finger (with ``y = f Y / Z``: ``Y``, ``Z`` and ``f`` scaled by ``s`` scale ``y`` by ``s`` and keep ``x``).
-The relative rotations are the original rig's; nothing about the finger's width in pixels may be assumed.
-"""
+"""A finger thicker or thinner than the ones the project was tuned on: the same turns, the focal scaled with it
+(photos stretched across the finger: :mod:`fingersplat3d.experiments.thickness`)."""
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
+import pytest
 
 from fingersplat3d.eval import relative_rotation_errors
+from fingersplat3d.experiments.thickness import stretched_across
 from fingersplat3d.io.capture import read_capture
 from fingersplat3d.pipeline import FuseConfig, fuse
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed0"
-
-
-def stretched_across(image: np.ndarray, factor: float) -> np.ndarray:
-    """``image`` (the finger along its rows) scaled by ``factor`` across them about its centre, its size kept."""
-    height, width = image.shape[:2]
-    warp = np.array([[1.0, 0.0, 0.0], [0.0, factor, (height - 1) / 2 * (1 - factor)]])
-    return cv2.warpAffine(image, warp, (width, height), flags=cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC,
-                          borderMode=cv2.BORDER_REFLECT_101)
 
 
 def test_a_thicker_or_thinner_finger_fuses_to_the_same_turns_and_a_focal_scaled_with_it():
@@ -41,3 +29,16 @@ def test_a_thicker_or_thinner_finger_fuses_to_the_same_turns_and_a_focal_scaled_
         focals[factor] = result.cameras[0].K[0, 0]
     # The fitted focal follows the cameras' (measured: 0.4 % off); one held by the finger's width in pixels would not.
     assert abs(focals[1.25] / focals[0.8] / 1.5625 - 1) < 0.03
+
+
+def test_the_stretch_runs_across_the_finger_and_keeps_the_photo_size():
+    image = np.zeros((40, 60), np.uint8)
+    image[15:25, :] = 200  # a finger along the rows, 10 px wide
+    for axis in ("auto", "horizontal"):
+        wider = stretched_across(image, 1.5, axis)
+        assert wider.shape == image.shape and (wider[20, :] == 200).all()
+        assert wider[:, 30].sum() / 200 == pytest.approx(15, abs=0.3)  # 10 px wide, 1.5 times
+    turned = stretched_across(image.T.copy(), 1.5, "vertical")  # the same finger along the columns
+    assert turned[30, :].sum() / 200 == pytest.approx(15, abs=0.3) and (turned[:, 20] == 200).all()
+    with pytest.raises(ValueError):
+        stretched_across(image, 1.5, "diagonal")

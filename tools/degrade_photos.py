@@ -12,10 +12,8 @@ mean and adds noise of sigma 4 (JPEG 95); ``hazy`` blurs by 1.3 px, keeps 0.4 of
 background lifted to a third of the skin's level, as under haze or glare) and adds noise of sigma 5 (JPEG 90). Noise draws from ``numpy.random.default_rng(seed)`` in file order.
 ``thin`` and ``thick`` stretch each photo across the finger by 0.8x / 1.25x about its centre (``--finger-axis``: the
 finger along the photo's rows or columns; ``auto``, along its long side, as in a rig's frames, UWA's included), the
-size kept (JPEG 95): exactly the photos of a finger scaled by that factor about its axis, the cameras moved out with it
-and their focal scaled by it, when each camera's rows (columns) run along the finger, as a ring's do -- the relative
-rotations are the original's, the focal ``factor`` times its own (with ``y = f Y / Z``, scaling ``Y``, ``Z`` and ``f``
-by ``s`` scales ``y`` by ``s`` and keeps ``x = f X / Z``).
+size kept (JPEG 95): the photos of a finger scaled by that factor about its axis, the rig's turns kept and the focal
+scaled (:mod:`fingersplat3d.experiments.thickness`).
 The measured rows are in docs/measurements.md (the same captures mirrored, turned or degraded; thinner and thicker).
 """
 from __future__ import annotations
@@ -28,6 +26,7 @@ import cv2
 import numpy as np
 
 from fingersplat3d.errors import run_script
+from fingersplat3d.experiments.thickness import FINGER_AXES, stretched_across
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 
@@ -51,25 +50,13 @@ def degrade(image: np.ndarray, kind: str, rng: np.random.Generator, finger_axis:
     return np.clip(pixels * 0.3 + rng.normal(0, 3, pixels.shape), 0, 255).astype(np.uint8), 90
 
 
-def stretched_across(image: np.ndarray, factor: float, finger_axis: str = "auto") -> np.ndarray:
-    """``image`` scaled by ``factor`` across the finger about its centre, its size kept (edges mirrored); the finger
-    along the rows (``horizontal``), the columns (``vertical``) or the long side (``auto``)."""
-    height, width = image.shape[:2]
-    centre = ((width - 1) / 2, (height - 1) / 2)
-    along_rows = finger_axis == "horizontal" or (finger_axis == "auto" and width >= height)
-    sx, sy = (1.0, factor) if along_rows else (factor, 1.0)
-    warp = np.array([[sx, 0, centre[0] * (1 - sx)], [0, sy, centre[1] * (1 - sy)]])
-    return cv2.warpAffine(image, warp, (width, height), flags=cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC,
-                          borderMode=cv2.BORDER_REFLECT_101)
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("src", type=Path)
     parser.add_argument("out", type=Path)
     parser.add_argument("--kind", choices=("noise", "small", "half", "dark", "faint", "hazy", "thin", "thick"), required=True)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--finger-axis", choices=("auto", "horizontal", "vertical"), default="auto",
+    parser.add_argument("--finger-axis", choices=FINGER_AXES, default="auto",
                         help="thin, thick: the finger along the photos' rows, columns, or long side (auto)")
     args = parser.parse_args()
     files = sorted(p for p in args.src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if args.src.is_dir() else []
