@@ -61,7 +61,7 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
             warn(report, "the turn between " + ", ".join(f"{pair} (±{value:.1f}°)" for pair, value in loose.items())
                  + f" is poorly determined: its uncertainty from the fit's curvature is above {MAX_TURN_UNCERTAINTY_DEG:g}° "
                  "(well-determined pairs read about 0.1°, and the real error runs about ten times this figure)"
-                 + ("; two views cannot fix the focal, and their turn follows it (10-20° off on real photos): give the "
+                 + ("; two views cannot fix the focal, and their turn follows it (5-17° off on real photos): give the "
                     "cameras' focal with --focal-px if it is known (photos whose EXIF records it give it themselves), or add a "
                     "view" if focal_fitted else ""))
     if alignment.turn_sensitivity_deg is not None:
@@ -80,10 +80,12 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
                                           "where the fit slid" if probe.get("taken_share") else "")
                          + ": the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
         elif loose:
+            taken = (probe or {}).get("taken_share")
             warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
                  + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
-                 f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move); "
-                 "the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
+                 f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move)"
+                 + (f"; the focal is taken at the short end of what fits, {taken:.2f} of where the fit slid" if taken else "")
+                 + "; the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     warn_without_tip(alignment, report)
     _check_turns_against_widths(capture, alignment, status, report)
     return status

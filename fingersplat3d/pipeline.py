@@ -75,7 +75,8 @@ class FuseConfig:
     """The cameras' focal length in the photos' pixels, when known (one camera model for every view): the pointmaps
     are made with it and the alignment keeps it instead of fitting one. Two views cannot fix the focal themselves
     (their optical axes meet at the finger), and their turn follows it: on the real dev captures two views alone
-    turned 14-16 degrees off with the focal fitted, 1-5 with it given (docs/measurements.md, real captures)."""
+    turned 5-17 degrees off with the focal fitted (taken at the short end of its valley), 1-5 with it given
+    (docs/measurements.md, real captures)."""
     view_focals_px: tuple[float, ...] | None = None
     """Each view's focal in its photo's pixels, when known view by view and not alike (photos whose EXIF records other
     zooms): the pointmaps are made with them and the alignment keeps each. ``focal_px`` takes precedence."""

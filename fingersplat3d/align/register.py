@@ -453,16 +453,16 @@ def _guided_pass(views: Sequence[View], prepared: _Prepared, alignment: GlobalAl
 
 def _how_sure(alignment: GlobalAlignment, depths, focals, solved_with: tuple, config: RegistrationConfig,
               say) -> GlobalAlignment:
-    """The alignment with how sure it is: the focal probe (and, where the photos do not hold the focal and three views
-    or more are aligned, the alignment re-fitted at the short end of its valley), then the turns' uncertainty from the
-    curvature of the alignment reported. ``solved_with``: the correspondences and least turns it was fitted to."""
+    """The alignment with how sure it is: the focal probe (and, where the photos do not hold the focal, the alignment
+    re-fitted at the short end of its valley: :func:`_takes_short_end`), then the turns' uncertainty from the curvature
+    of the alignment reported. ``solved_with``: the correspondences and least turns it was fitted to."""
     solved_config = config.global_align  # what the reported alignment was solved with
     if sum(alignment.aligned) >= 2:
         say("how sure: probing the focal")
         probe = focal_probe(alignment, depths, focals, solved_with[0], config.global_align, solved_with[1])
         if probe is not None:
             summary = probe.summary()
-            if not probe.held and config.short_end_tolerance > 0 and sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
+            if not probe.held and config.short_end_tolerance > 0 and _takes_short_end(alignment, probe, config):
                 say("the focal not held: its short end")
                 shorter = short_end(alignment, depths, focals, solved_with[0], config.global_align,
                                     config.short_end_tolerance, solved_with[1])
@@ -474,6 +474,15 @@ def _how_sure(alignment: GlobalAlignment, depths, focals, solved_with: tuple, co
     return replace(alignment, turn_uncertainty_deg=turn_uncertainty_of(alignment, depths, focals, solved_with[0],
                                                                        solved_config, solved_with[1]))
 
+
+def _takes_short_end(alignment: GlobalAlignment, probe, config: RegistrationConfig) -> bool:
+    """Whether an alignment whose focal the photos do not hold is re-fitted at the short end of its valley: with three
+    views or more, always; with two, where the probe's shorter focal fits nearly as well
+    (``RegistrationConfig.two_view_short_end_rise``: the valley's short side flat)."""
+    if sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
+        return True
+    rise = probe.shorter_loss_rise
+    return rise is not None and bool(np.isfinite(rise)) and rise < config.two_view_short_end_rise
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,

@@ -143,8 +143,16 @@ class RegistrationConfig:
     alignment is re-fitted with the focal held at the shortest one whose loss is within this share of the fit's
     (:func:`~fingersplat3d.align.solve.sensitivity.short_end`; ``alignment.focal_probe.taken_share`` in the report):
     the fit's slide toward a nearly orthographic camera is the valley's drift, and the true focal was on the short side
-    of it every time it was measured. Three views or more (``PIVOT_MIN_VIEWS``; two views cannot fix the focal at
-    all). 0 keeps the fitted focal."""
+    of it every time it was measured. Three views or more (``PIVOT_MIN_VIEWS``), and two views where
+    ``two_view_short_end_rise`` says so. 0 keeps the fitted focal."""
+    two_view_short_end_rise: float = 0.25
+    """Two views take the short end only where the focal probe's shorter focal raised the loss by less than this share:
+    the valley's short side flat, as perspective cameras give (the real rig's, 1.3 times the photo's long side; synthetic
+    fingers at that scale), where a two-view fit slides 1.1-1.6 times long and turns 5-26 degrees too far; near-orthographic
+    cameras' valleys are steep there (+32 to +87 %), their fits slide 0-16 % and walking them short costs degrees
+    (docs/measurements.md, two views' focal). Measured: real pairs 17.8 / 16.0 -> 7.3 / 6.1 degrees, synthetic pairs at
+    the real scale 8.1 / 10.3 -> 2.5 / 2.2; 640x512 synthetic, sections unlike the prior's and another group's renders
+    unchanged. 0 keeps two views' fitted focal."""
     redraw_tolerance: float = 0.05
     """With a ``redraw`` callable, the pointmaps are drawn again when the fitted focal is further than this share
     from the one they were drawn with (closer, the perspective barely changes the relief)."""
