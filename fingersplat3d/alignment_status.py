@@ -76,16 +76,13 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
                          f"focal {1 / probe['shorter_share']:.1f} times shorter fits about as well (the loss "
                          f"{100 * probe['shorter_loss_rise']:+.0f} %), with the turn between {moved[0]} {moved[1]:.1f}° "
                          "away; seen on crops without the fingertip whose outer views share no skin (real ones: turns up "
-                         "to 19° off)" + (f"; the focal is taken at the short end of what fits, {probe['taken_share']:.2f} of "
-                                          "where the fit slid" if probe.get("taken_share") else "")
+                         "to 19° off)" + _short_end_taken(probe)
                          + ": the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) fixes it")
         elif loose:
-            taken = (probe or {}).get("taken_share")
             warn(report, "the turn between " + ", ".join(f"{pair} (moves {value:.1f}°)" for pair, value in loose.items())
                  + " follows the focal, which the photos fix only loosely: with the focal held 10 % longer than fitted, "
                  f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move)"
-                 + (f"; the focal is taken at the short end of what fits, {taken:.2f} of where the fit slid" if taken else "")
-                 + "; the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
+                 + _short_end_taken(probe) + "; the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     warn_without_tip(alignment, report)
     _check_turns_against_widths(capture, alignment, status, report)
     return status
@@ -100,6 +97,11 @@ NO_TIP_SENSITIVITY_DEG = 0.3
 and a capture without a tip is not warned about. Measured (docs/measurements.md, stop 79): the real crops' most
 sensitive pairs move 0.8-2.8 degrees, another group's cropped renders (within 0.3 degrees of their rolls) 0.01 at most."""
 
+
+def _short_end_taken(probe: dict | None) -> str:
+    """The warnings' clause for a focal taken at the short end of its valley (``focal_probe.taken_share``), or ""."""
+    taken = (probe or {}).get("taken_share")
+    return f"; the focal is taken at the short end of what fits, {taken:.2f} of where the fit slid" if taken else ""
 
 def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
     """A warning where three views or more were aligned with the focal fitted and no registered view's outline closes

@@ -140,7 +140,6 @@ def test_no_redraw_through_a_lost_focal_or_with_two_views(focal, aligned):
     assert _redrawn(alignment, depths, [3000.0] * 3, ([], None), redraw, RegistrationConfig()) is None
 
 
-
 @pytest.mark.parametrize("aligned, rise, taken", [(3, 0.9, True), (2, 0.08, True), (2, 0.24, True), (2, 0.32, False),
                                                   (2, None, False), (2, float("nan"), False)])
 def test_two_views_take_the_short_end_only_where_its_side_of_the_valley_is_flat(aligned, rise, taken):
@@ -155,6 +154,7 @@ def test_two_views_take_the_short_end_only_where_its_side_of_the_valley_is_flat(
     probe = SimpleNamespace(shorter_loss_rise=rise)
     assert _takes_short_end(alignment, probe, RegistrationConfig()) is taken
     assert not _takes_short_end(alignment, probe, RegistrationConfig(two_view_short_end_rise=0.0)) or aligned >= 3
+
 
 def test_a_view_no_agreeing_pair_reaches_is_no_longer_aligned():
     from fingersplat3d.align.register import _still_reached

@@ -484,6 +484,7 @@ def _takes_short_end(alignment: GlobalAlignment, probe, config: RegistrationConf
     rise = probe.shorter_loss_rise
     return rise is not None and bool(np.isfinite(rise)) and rise < config.two_view_short_end_rise
 
+
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
                          rng, say) -> GlobalAlignment:
