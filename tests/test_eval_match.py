@@ -96,6 +96,20 @@ def test_both_protocols_end_to_end(match_data, tmp_path, capsys):
     assert all(r["nfiq2"] for r in prints if r["name"].startswith("1_1_1"))
 
 
+def test_learned_minutiae_tell_the_same_finger_apart(match_data, tmp_path, capsys):
+    """--minutiae leader: the same photos compared on pyfing's LEADER minutiae; the turned copy of a capture still
+    scores above the other finger, and the summary names the extractor."""
+    photos, _ = match_data
+    out = tmp_path / "out"
+    assert main(["eval", "match", str(photos), "--views", "1", "--minutiae", "leader", "-o", str(out)]) == 0
+    rows = list(csv.DictReader(open(out / "scores.csv")))
+    genuine = [int(r["score"]) for r in rows if r["genuine"] == "1"]
+    impostor = [int(r["score"]) for r in rows if r["genuine"] == "0"]
+    assert len(genuine) == 1 and len(impostor) == 2 and min(genuine) > max(impostor)
+    assert (out / "summary.md").read_text().startswith("# Matching (leader + bozorth3)")
+    capsys.readouterr()
+
+
 def test_bad_input_is_one_sentence(match_data, tmp_path, capsys):
     photos, rec = match_data
     assert main(["eval", "match", str(photos / "1_1_1_1_0.png"), "-o", str(tmp_path / "a")]) == EXIT_INPUT

@@ -32,6 +32,37 @@ def test_three_synthetic_views_register_within_a_few_degrees(uwa640):
     assert len(result.turn_changes_deg) == 2 and result.turn_changes_deg[-1] <= RegistrationConfig().settled_turn_deg
 
 
+def test_the_photos_order_does_not_move_the_turns_or_the_focal(uwa640):
+    """The guided rounds match each pair from a grid on either view, so the same photos given in the reverse order
+    give the same cameras (measured on the shipped sample: 0.04 degrees and 0.4 % apart over its six orders, 0.41
+    degrees and 2.5 % with each pair matched from its first view alone)."""
+    forward = _register(uwa640.views)
+    backward = _register(uwa640.views[::-1])
+    ahead = [np.asarray(pose) for pose in forward.alignment.world_to_cam]
+    back = [np.asarray(pose) for pose in backward.alignment.world_to_cam][::-1]
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        turn = rotation_angle_deg(ahead[b][:3, :3] @ ahead[a][:3, :3].T, back[b][:3, :3] @ back[a][:3, :3].T)
+        assert turn < 0.15
+    assert np.ravel(backward.alignment.focals)[0] == pytest.approx(np.ravel(forward.alignment.focals)[0], rel=0.01)
+
+
+def test_matches_read_the_other_way_round_and_joined_keep_every_correspondence():
+    from fingersplat3d.align.correspond.guided import GuidedMatches
+
+    rng = np.random.default_rng(0)
+    first = GuidedMatches(rng.normal(size=(3, 2)), rng.normal(size=(3, 2)), rng.uniform(size=3),
+                          rng.normal(size=(3, 2, 2)), rng.normal(size=(3, 2, 2)), tried=7)
+    second = GuidedMatches(rng.normal(size=(2, 2)), rng.normal(size=(2, 2)), rng.uniform(size=2),
+                           rng.normal(size=(2, 2, 2)), rng.normal(size=(2, 2, 2)), tried=4)
+    back = second.swapped()
+    assert np.array_equal(back.uv_a, second.uv_b) and np.array_equal(back.information_a, second.information_b)
+    assert np.array_equal(back.swapped().uv_a, second.uv_a) and back.tried == 4
+    both = first.joined(back)
+    assert len(both) == 5 and both.tried == 11
+    assert np.array_equal(both.uv_b[3:], second.uv_a) and np.array_equal(both.information_b[3:], second.information_a)
+    assert len(first.joined(GuidedMatches.empty())) == 3
+
+
 def test_two_views_with_the_focal_held_take_rounds_until_their_turn_settles(uwa640):
     """Two views with the focal held: another round after ``guided_rounds`` while the last one turned them by more than
     ``settled_turn_deg``, never past ``guided_rounds + extra_rounds``. With a fitted focal two rounds are an early stop

@@ -1,12 +1,13 @@
 """Photos' prints against true rolled prints: the photo scaled and turned (``--flat``) or unrolled (the default).
 
     python3 tools/bench_photo_print.py [--seeds 0 1 ... 9] [--size 1280x1024] [--impose ../shared/data/impose-dev] [--out DIR]
+                                       [--minutiae mindtct|leader]
 
 Per seed: an ``fs3d synth`` finger on the uwa rig (``--size``, default 1280x1024); the front photo's print made both ways
 (:func:`fingersplat3d.eval.contact.contact_like`, :func:`fingersplat3d.prints.make.unrolled_photo`; the photo and its
 found mask alone, scaled by the ridge period) and scored against the finger's true rolled print: *placed*, the true
 minutiae the photo shows, carried to the print by its map back to the photo, within 8 px of their true place after one
-similarity fit (the print's geometry alone); *located*, the true minutiae inside the print that mindtct finds within
+similarity fit (the print's geometry alone); *located*, the true minutiae inside the print that mindtct (or LEADER) finds within
 8 px after one similarity fit (:mod:`fingersplat3d.eval.rolled_truth`); bozorth3 against the true print (genuine) and
 the other seeds' (impostors). With ``--impose``, every render of another
 group's finger (IMPOSE, nine rolls) printed both ways against its rolled print, impostors the synthetic true prints.
@@ -66,6 +67,8 @@ def main() -> int:
     parser.add_argument("--size", default="1280x1024", help="the photos' size, WxH")
     parser.add_argument("--impose", type=Path, nargs="?", const=DEFAULT_IMPOSE, help="the IMPOSE sample's folder")
     parser.add_argument("--out", type=Path, help="folder to keep the prints in")
+    parser.add_argument("--minutiae", choices=("mindtct", "leader"), default="mindtct",
+                        help="the minutiae located and compared by bozorth3 (on every print alike)")
     args = parser.parse_args()
     if not nbis_available():
         print("bench_photo_print: needs nbis-py (mindtct, bozorth3)", file=sys.stderr)
@@ -75,7 +78,7 @@ def main() -> int:
         return 2
 
     def found_in(image):
-        return analyse(ContactImage.of_print(image, 9.0), nfiq2=False)
+        return analyse(ContactImage.of_print(image, 9.0), nfiq2=False, extractor=args.minutiae)
 
     size = tuple(int(v) for v in args.size.lower().split("x"))
     truths, found, rows = {}, {kind: {} for kind in KINDS}, []
@@ -112,7 +115,8 @@ def main() -> int:
                                            f"{row[k]['located']:.0%} of {row[k]['inside']}" for k in KINDS),
               file=sys.stderr, flush=True)
     info = machine()
-    print(f"Machine: {info['cpu']}, {info['cores']} cores; uwa rig {args.size}, the front photo alone.\n")
+    print(f"Machine: {info['cpu']}, {info['cores']} cores; uwa rig {args.size}, the front photo alone; minutiae "
+          f"{args.minutiae}.\n")
     print("| seed | placed within 8 px: flat / unrolled | located within 8 px: flat / unrolled | bozorth3 genuine: flat / "
           "unrolled | print width px | s |")
     print("|---|---|---|---|---|---|")

@@ -1,13 +1,13 @@
 """Rolled-equivalent prints of synthetic fingers against their true rolled prints (issue 23's targets).
 
     python3 tools/bench_print.py [--seeds 0 1 2 3 4] [--rig uwa] [--size 1280x1024] [--scale truth|ridge]
-                                 [--enhance gabor|snfen|gbfen] [--work FOLDER]
+                                 [--enhance gabor|snfen|gbfen] [--minutiae mindtct|leader] [--work FOLDER]
 
 Per seed: ``fs3d synth`` (three views at -45/0/+45 degrees on the uwa rig), a geometry-only fuse of the
 photos alone (no cameras; with the photos' true pixels per mm at the finger when ``--scale truth``, as a
 calibrated rig knows it, else the print is scaled by the ridge period), ``fs3d print`` of the
 reconstruction, then against the finger's true ``rolled_print.png``: the share of true minutiae inside the
-print that mindtct finds within 8 px after a similarity fit, and those the print's geometry alone puts within 8 px
+print that mindtct (or LEADER, ``--minutiae leader``) finds within 8 px after a similarity fit, and those the print's geometry alone puts within 8 px
 (*placed*: carried through its map of 3D points; :mod:`fingersplat3d.eval.rolled_truth`),
 bozorth3 against its own true print (genuine) and the other seeds' (impostor), the coverage in degrees
 of roll, NFIQ2, and the print's time. Prints a markdown table; ``--out`` keeps the prints.
@@ -43,6 +43,8 @@ def main() -> int:
     parser.add_argument("--scale", choices=("truth", "ridge"), default="truth")
     parser.add_argument("--out", type=Path, help="folder to keep the prints in")
     parser.add_argument("--enhance", default="gabor", help="the print's enhancer: gabor (default), or pyfing's snfen / gbfen")
+    parser.add_argument("--minutiae", choices=("mindtct", "leader"), default="mindtct",
+                        help="the minutiae located and compared by bozorth3 (on the print and the true print alike)")
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x"))
@@ -64,10 +66,10 @@ def main() -> int:
             started = time.perf_counter()
             result, scale_from, _ = print_reconstruction(reconstruction, enhancer=args.enhance)
             seconds = time.perf_counter() - started
-            found = analyse(ContactImage.of_print(result.image, result.period_px), nfiq2=False)
+            found = analyse(ContactImage.of_print(result.image, result.period_px), nfiq2=False, extractor=args.minutiae)
             quality = analyse(ContactImage.of_print(nfiq2_region(result.image, result.origin_px[0]), 9.0)).nfiq2
             rolled = synth.rolled
-            truth = analyse(ContactImage.of_print(rolled.image, 9.0), nfiq2=False)
+            truth = analyse(ContactImage.of_print(rolled.image, 9.0), nfiq2=False, extractor=args.minutiae)
             true_xy = np.array([m["xy"] for m in rolled.minutiae]).reshape(-1, 2)
             true_deg = np.array([m["angle_deg"] for m in rolled.minutiae])
             half_width_px = rolled.image.shape[1] / 2.0
@@ -92,9 +94,9 @@ def main() -> int:
         row["impostors"] = [match_score(prints[row["seed"]], truths[s]) for s in truths if s != row["seed"]]
         row["impostor"] = max(row["impostors"], default=0)
     print(f"Machine: {info['cpu']}, {info['cores']} cores; {args.rig} rig {args.size}, scale from {args.scale}; "
-          f"enhancer {args.enhance}.\n")
+          f"enhancer {args.enhance}; minutiae {args.minutiae}.\n")
     print("| seed | true minutiae inside | located within 8 px | placed within 8 px | fit scale | bozorth3 genuine "
-          "| bozorth3 impostor (max) | coverage ° | NFIQ2 | mindtct minutiae | print s |\n"
+          "| bozorth3 impostor (max) | coverage ° | NFIQ2 | minutiae found | print s |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['seed']} | {r['inside']} | {100 * r['located']:.0f} % | {100 * r['placed']:.0f} % "

@@ -20,7 +20,8 @@ The loop (all numbers scale with the measured ridge period):
 4. **guided rounds**: every pair of aligned views is matched again, predicted through the 3D
    model (:class:`~fingersplat3d.align.correspond.model_predictor.ModelPredictor`) with a search of
    ``guided_search`` periods (pairs that had no first guess, such as views 90 degrees apart, get
-   one now), verified, and the alignment is refined from where it stands. The model's error
+   one now), from a grid on each view of the pair (``guided_both_ways``: the result does not depend on the
+   photos' order), verified, and the alignment is refined from where it stands. The model's error
    shrinks each round, so the matches come closer to the truth and cover more of the overlap. A pair must
    also **agree**: ``min_agreement`` of the points the model puts on both views must match. Views of two
    fingers pass a chart vote and an epipolar check by chance now and then, never this; a view that only
@@ -192,8 +193,15 @@ def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: i
                    config: RegistrationConfig) -> tuple[GuidedMatches, GuidedMatches, float]:
     """A pair matched through the 3D model of ``alignment``: the matches, the verified ones, and their agreement (the
     verified share of the points searched; 0 where none was)."""
-    matches = match_guided(prepared.maps[a], prepared.maps[b], ModelPredictor.from_alignment(alignment, a, b),
-                           prepared.period, config.guided_search * prepared.period)
+    def matched(x: int, y: int, stride: float | None = None) -> GuidedMatches:
+        return match_guided(prepared.maps[x], prepared.maps[y], ModelPredictor.from_alignment(alignment, x, y),
+                            prepared.period, config.guided_search * prepared.period, stride=stride)
+
+    if config.guided_both_ways:  # a grid on each view, sqrt(2) periods apart: as many points as one grid a period apart
+        stride = np.sqrt(2.0) * prepared.period
+        matches = matched(a, b, stride).joined(matched(b, a, stride).swapped())
+    else:
+        matches = matched(a, b)
     verified = _verified(matches, prepared.period, config)
     return matches, verified, len(verified) / max(matches.tried, 1)
 
@@ -258,8 +266,9 @@ def distinct_viewpoints(world_to_cam, views) -> int:
 
 
 def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.ndarray, cap: int = 0) -> PairCorrespondences:
-    """The pair's correspondences for the alignment; with ``cap`` > 0 at most that many, evenly along a's grid (raster
-    order), each weighing as much more as the pair's total weight stays the same."""
+    """The pair's correspondences for the alignment; with ``cap`` > 0 at most that many, evenly along the grids they
+    were matched from (each in raster order: a's, then b's), each weighing as much more as the pair's total weight
+    stays the same."""
     weight = np.clip(matches.score, 1e-3, 1.0)
     if 0 < cap < len(matches):
         keep = np.unique(np.linspace(0, len(matches) - 1, cap).round().astype(int))

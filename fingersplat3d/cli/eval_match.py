@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..atomic import atomic_dir, check_free
 from ..errors import EXIT_INCOMPLETE, InputError
+from ..eval.learned_minutiae import MINUTIAE_EXTRACTORS
 from ..prints.learned import ENHANCERS
 from .common import finished, nbis_needed
 from .types import angle_list
@@ -56,6 +57,9 @@ def add(actions) -> None:
                             f"{','.join(f'{a:g}' for a in DEFAULT_ANGLES)})")
     match.add_argument("--enhance", choices=ENHANCERS, default="gabor",
                        help="ridge enhancement of the rolled prints (as fs3d print --enhance)")
+    match.add_argument("--minutiae", choices=MINUTIAE_EXTRACTORS, default="mindtct",
+                       help="the minutiae bozorth3 compares: NIST's mindtct (the default) or pyfing's learned LEADER "
+                            "(pip install '.[learned]'; measured against mindtct in docs/measurements.md)")
     match.add_argument("--flat", action="store_true",
                        help="photos compared with flat-laid prints (--gallery, --rolled) scaled and turned alone, not "
                             "unrolled first (as fs3d print --flat; photos compared with photos or renders always are)")
@@ -87,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
                                        naming=args.naming, ridges=args.ridges, rolled=args.rolled,
                                        gallery=gallery, mirror=args.mirror, enhancer=args.enhance,
-                                       flat=args.flat)
+                                       flat=args.flat, extractor=args.minutiae)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

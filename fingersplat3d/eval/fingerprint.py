@@ -4,9 +4,10 @@ The implementation is NIST's NBIS and NFIQ2 as packaged by ``nbis-py`` (pinned 0
 ``nbis-python`` releases need a newer glibc than common Linux machines have). Prints come from
 :func:`fingersplat3d.eval.contact.contact_like` (8-bit gray, ridges dark, ~500 ppi).
 
-* :func:`analyse`: minutiae (in the *photo's* pixels, through the print's affine map) and the NFIQ2
-  score. A print NFIQ2 cannot score (too small, no ridge flow) is a :class:`Fingerprint` with
-  ``nfiq2`` None and the reason in ``failure``; its minutiae are still extracted when mindtct can.
+* :func:`analyse`: minutiae (in the *photo's* pixels, through the print's affine map; mindtct's, or pyfing's
+  LEADER's with ``extractor="leader"``) and the NFIQ2 score. A print NFIQ2 cannot score (too small, no ridge
+  flow) is a :class:`Fingerprint` with ``nfiq2`` None and the reason in ``failure``; its minutiae are still
+  extracted when the extractor can.
 * :func:`fingerprint_of`: a photo or render (and its finger mask, found when not given) made a
   print and analysed; a photo with no finger is a failure reason, not an exception.
 * :func:`match_score`: the bozorth3 score of two fingerprints (0 when either has no minutiae).
@@ -21,10 +22,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..errors import FS3DError
+from ..errors import FS3DError, InputError
 from .contact import ContactImage, contact_like
+from .learned_minutiae import MINUTIAE_EXTRACTORS
 
-__all__ = ["Fingerprint", "analyse", "fingerprint_of", "match_score", "nbis_available"]
+__all__ = ["Fingerprint", "MINUTIAE_EXTRACTORS", "analyse", "fingerprint_of", "match_score", "nbis_available"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,10 +67,13 @@ def _reason(error: Exception) -> str:
     return f"{type(error).__name__}: {text}" if type(error).__name__ not in text else text
 
 
-def analyse(contact: ContactImage, nfiq2: bool = True) -> Fingerprint:
-    """Minutiae and NFIQ2 of a print (see the module docstring)."""
+def analyse(contact: ContactImage, nfiq2: bool = True, extractor: str = "mindtct") -> Fingerprint:
+    """Minutiae and NFIQ2 of a print (see the module docstring); ``extractor``: mindtct's minutiae, or pyfing's LEADER
+    (:mod:`.learned_minutiae`, matched by bozorth3 through an ISO record: :mod:`.iso_minutiae`)."""
     import nbis
 
+    if extractor not in MINUTIAE_EXTRACTORS:
+        raise InputError(f"unknown minutiae extractor {extractor!r}; choose from {', '.join(MINUTIAE_EXTRACTORS)}")
     ok, png = cv2.imencode(".png", contact.image)
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
         raise RuntimeError("could not encode the print as PNG")
@@ -82,6 +87,8 @@ def analyse(contact: ContactImage, nfiq2: bool = True) -> Fingerprint:
             score = float(template.quality().score)
         except nbis.NbisError as error:
             failure, template = f"NFIQ2: {_reason(error)}", None
+    if extractor == "leader":
+        return _leader_fingerprint(contact, score, failure)
     if template is None:
         try:
             template = _extractor(False).extract_minutiae(data)
@@ -91,16 +98,37 @@ def analyse(contact: ContactImage, nfiq2: bool = True) -> Fingerprint:
     found = template.get()
     xy = np.array([[m.x(), m.y()] for m in found], np.float64).reshape(-1, 2)
     angles = np.array([float(m.angle()) for m in found], np.float64)
-    photo_xy = contact.to_photo(xy)
-    photo_angles = _photo_angles(contact, angles)
     reliability = np.array([float(m.reliability()) for m in found], np.float64)
     kinds = tuple("bifurcation" if "BIF" in str(m.kind()).upper() else "ending" for m in found)
-    minutiae = np.column_stack([photo_xy, photo_angles, reliability]) if len(found) else np.zeros((0, 4))
+    return _in_photo(contact, xy, angles, reliability, kinds, score, failure, template)
+
+
+def _leader_fingerprint(contact: ContactImage, score: float | None, failure: str) -> Fingerprint:
+    """LEADER's minutiae of the print, with a bozorth3 template read from their ISO record."""
+    from .iso_minutiae import iso_minutiae_record
+    from .learned_minutiae import leader_minutiae
+
+    xy, angles, kinds, quality = leader_minutiae(contact.image)
+    if not len(xy):
+        reason = "LEADER found no minutiae"
+        return Fingerprint(np.zeros((0, 4)), (), score, f"{failure}; {reason}" if failure else reason)
+    height, width = contact.image.shape
+    record = iso_minutiae_record(width, height, xy, angles, kinds, 100.0 * quality)
+    template = _extractor(False).load_iso_19794_2_2005(record)
+    return _in_photo(contact, xy, angles, quality, kinds, score, failure, template)
+
+
+def _in_photo(contact: ContactImage, xy: np.ndarray, angles: np.ndarray, reliability: np.ndarray,
+              kinds: tuple[str, ...], score: float | None, failure: str, template) -> Fingerprint:
+    """A :class:`Fingerprint` of minutiae found on the print (its pixels, NBIS's directions), in the photo's frame."""
+    if not len(xy):
+        return Fingerprint(np.zeros((0, 4)), (), score, failure, template)
+    minutiae = np.column_stack([contact.to_photo(xy), _photo_angles(contact, angles), reliability])
     return Fingerprint(minutiae, kinds, score, failure, template)
 
 
 def fingerprint_of(image: np.ndarray, mask: np.ndarray | None = None, *, ridges: str = "bright",
-                   period_px: float | None = None, nfiq2: bool = True, name: str = "image"
+                   period_px: float | None = None, nfiq2: bool = True, name: str = "image", extractor: str = "mindtct"
                    ) -> tuple[ContactImage | None, Fingerprint | None, str]:
     """``(print, fingerprint, failure)`` of a photo or render; ``mask`` None: the finger mask is found.
     When no print can be made (no finger), print and fingerprint are None and ``failure`` says why."""
@@ -111,7 +139,7 @@ def fingerprint_of(image: np.ndarray, mask: np.ndarray | None = None, *, ridges:
                                period_px=period_px)
     except FS3DError as error:
         return None, None, str(error)
-    fingerprint = analyse(contact, nfiq2=nfiq2)
+    fingerprint = analyse(contact, nfiq2=nfiq2, extractor=extractor)
     return contact, fingerprint, fingerprint.failure
 
 

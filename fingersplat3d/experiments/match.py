@@ -126,13 +126,13 @@ class _Print:
 
 
 def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Path, ridges: str,
-              unrolled: bool = False) -> _Print:
+              unrolled: bool = False, extractor: str = "mindtct") -> _Print:
     """A photo's or render's print, scaled and turned (:func:`~fingersplat3d.eval.fingerprint.fingerprint_of`) or
     ``unrolled`` (:func:`~fingersplat3d.prints.make.unrolled_photo`), written to ``folder``, with its minutiae."""
     from ..eval.fingerprint import analyse, fingerprint_of
 
     if not unrolled:
-        contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name)
+        contact, fingerprint, failure = fingerprint_of(image, mask, ridges=ridges, name=name, extractor=extractor)
         printed = None if contact is None else contact.image
     else:
         from ..align.correspond.texture import as_gray
@@ -146,7 +146,7 @@ def _print_of(name: str, image: np.ndarray, mask: np.ndarray | None, folder: Pat
                                      name=name)[0].image
         except FS3DError as error:
             return _Print(name, None, str(error))
-        fingerprint = analyse(ContactImage.of_print(printed))
+        fingerprint = analyse(ContactImage.of_print(printed), extractor=extractor)
         failure = fingerprint.failure
     if printed is not None:
         cv2.imwrite(str(folder / f"{name.replace('/', '__')}.png"), printed)
@@ -164,7 +164,8 @@ def _reconstruction_identity(folder: Path, pattern: re.Pattern):
     return cameras, identities
 
 
-def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, prints: Path, ridges: str):
+def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, prints: Path, ridges: str,
+                 extractor: str = "mindtct"):
     """Prints of a reconstruction rendered at ``angles``: ``(finger, capture, gallery view, [(angle, print)])``."""
     from ..device import resolve_device
     from ..io.gaussians_ply import read_gaussians_ply
@@ -186,11 +187,12 @@ def _synthesized(folder: Path, angles: tuple[float, ...], pattern: re.Pattern, p
     results = []
     for angle, view in zip(angles, render_views(model, [(f"{a:+.0f}", c) for a, c in zip(angles, placed)])):
         name = f"{folder.name}@{angle:+.0f}deg"
-        results.append((angle, _print_of(name, view.image, view.alpha >= 0.5, prints, ridges)))
+        results.append((angle, _print_of(name, view.image, view.alpha >= 0.5, prints, ridges, extractor=extractor)))
     return finger, capture, gallery_view, results
 
 
-def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str, enhancer: str = "gabor"):
+def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str, enhancer: str = "gabor",
+            extractor: str = "mindtct"):
     """The rolled-equivalent print of a reconstruction: ``(finger, capture, gallery view, print)``."""
     from ..eval.contact import ContactImage
     from ..eval.fingerprint import analyse
@@ -209,7 +211,7 @@ def _rolled(folder: Path, pattern: re.Pattern, prints: Path, ridges: str, enhanc
     except FS3DError as error:
         return finger, capture, gallery_view, _Print(name, None, str(error))
     cv2.imwrite(str(prints / f"{name}.png"), result.image)
-    fingerprint = analyse(ContactImage.of_print(result.image, result.period_px))
+    fingerprint = analyse(ContactImage.of_print(result.image, result.period_px), extractor=extractor)
     return finger, capture, gallery_view, _Print(name, fingerprint, fingerprint.failure, result.image)
 
 
@@ -234,7 +236,7 @@ def read_gallery(paths: list[Path], naming: str = GALLERY_NAMING) -> list[tuple[
     return gallery
 
 
-def _gallery_print(finger: str, path: Path):
+def _gallery_print(finger: str, path: Path, extractor: str = "mindtct"):
     """A contact print as it is (8-bit gray, ridges dark, ~500 ppi): ``(finger, _Print)``."""
     from ..eval.contact import ContactImage
     from ..eval.fingerprint import analyse
@@ -245,27 +247,29 @@ def _gallery_print(finger: str, path: Path):
     except FS3DError as error:
         return finger, _Print(f"gallery/{path.stem}", None, str(error))
     image = np.rint(np.clip(gray, 0, 1) * 255).astype(np.uint8)
-    fingerprint = analyse(ContactImage.of_print(image), nfiq2=False)
+    fingerprint = analyse(ContactImage.of_print(image), nfiq2=False, extractor=extractor)
     return finger, _Print(f"gallery/{path.stem}", fingerprint if fingerprint.count else None, fingerprint.failure or
-                          ("" if fingerprint.count else "mindtct found no minutiae"))
+                          ("" if fingerprint.count else f"{extractor} found no minutiae"))
 
 
-def _mirrored(probe: _Print):
+def _mirrored(probe: _Print, extractor: str = "mindtct"):
     """The probe's print mirrored left-right and analysed again (None when it has no print)."""
     from ..eval.contact import ContactImage
     from ..eval.fingerprint import analyse
 
     if probe.image is None:
         return None
-    return analyse(ContactImage.of_print(probe.image[:, ::-1].copy()), nfiq2=False)
+    return analyse(ContactImage.of_print(probe.image[:, ::-1].copy()), nfiq2=False, extractor=extractor)
 
 
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
                          progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
-                         mirror: bool = False, enhancer: str = "gabor", flat: bool = False) -> dict:
+                         mirror: bool = False, enhancer: str = "gabor", flat: bool = False,
+                         extractor: str = "mindtct") -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary (``enhancer``: of the
-    rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`). Photos compared with photos or renders (one
+    rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`; ``extractor``: every print's minutiae,
+    :data:`~fingersplat3d.eval.fingerprint.MINUTIAE_EXTRACTORS`). Photos compared with photos or renders (one
     camera's foreshortening on both sides) are scaled and turned; compared with flat-laid prints (the gallery's contact
     prints, the rolled prints), they are unrolled first (:func:`~fingersplat3d.prints.make.unrolled_photo`), unless
     ``flat``."""
@@ -286,12 +290,12 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
             real.append(_Print(sample.name, None, str(error)))
             laid.append(real[-1])
             continue
-        real.append(_print_of(sample.name, image, None, prints, ridges))
-        laid.append(_print_of(f"{sample.name}@unrolled", image, None, prints, ridges, unrolled=True)
+        real.append(_print_of(sample.name, image, None, prints, ridges, extractor=extractor))
+        laid.append(_print_of(f"{sample.name}@unrolled", image, None, prints, ridges, unrolled=True, extractor=extractor)
                     if unroll and real[-1].fingerprint is not None else real[-1])
-    synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges)
+    synthesized = [_synthesized(folder, tuple(angles), pattern, prints, ridges, extractor)
                    for folder in tqdm(reconstructions, desc="prints (renders)", unit="model", disable=not progress)]
-    unrolled = [_rolled(folder, pattern, prints, ridges, enhancer)
+    unrolled = [_rolled(folder, pattern, prints, ridges, enhancer, extractor)
                 for folder in tqdm(rolled, desc="prints (rolled)", unit="model", disable=not progress)]
     rows = []
     for i, j, genuine in real_pairs(samples):
@@ -321,13 +325,13 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                 rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
                              "genuine": int(sample.finger == finger_a), "angle_deg": "",
                              "score": match_score(print_a.fingerprint, laid[k].fingerprint)})
-    contact = [_gallery_print(finger, path) for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print",
+    contact = [_gallery_print(finger, path, extractor) for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print",
                                                                       disable=not progress)]
     probes = ([("real", sample.finger, p) for sample, p in zip(samples, laid)]
               + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
               + [("rolled", finger, p) for finger, _, _, p in unrolled])
     for kind, finger, probe in probes if contact else ():
-        template = _mirrored(probe) if mirror and probe.fingerprint is not None else probe.fingerprint
+        template = _mirrored(probe, extractor) if mirror and probe.fingerprint is not None else probe.fingerprint
         if template is None:
             continue
         for gallery_finger, entry in contact:
@@ -343,7 +347,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
                  "failure": p.failure} for p in all_prints])
     write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score"), rows)
-    summary = summarise(rows, all_prints)
+    summary = summarise(rows, all_prints) | {"minutiae": extractor}
     (out / "summary.md").write_text(summary_markdown(summary))
     curves = {}
     from ..eval.verification import det_curve
@@ -356,7 +360,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     if curves:
         from .plots import det_picture
 
-        det_picture(out / "det.png", curves, "bozorth3 on mindtct minutiae")
+        det_picture(out / "det.png", curves, f"bozorth3 on {extractor} minutiae")
     return summary
 
 
@@ -399,7 +403,7 @@ def _percent(value) -> str:
 
 
 def summary_markdown(summary: dict) -> str:
-    lines = ["# Matching (mindtct + bozorth3)", "",
+    lines = [f"# Matching ({summary.get('minutiae', 'mindtct')} + bozorth3)", "",
              f"{summary['prints']} prints; {len(summary['failed'])} could not be made, NFIQ2 failed on "
              f"{summary['nfiq2_failed']}; mean NFIQ2 {summary['nfiq2_mean']:.1f}." if summary["nfiq2_mean"] is not None
              else f"{summary['prints']} prints; {len(summary['failed'])} could not be made.", ""]

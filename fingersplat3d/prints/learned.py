@@ -16,11 +16,10 @@ first use, with one sentence when missing. Pure numpy apart from the library cal
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from ..errors import InputError
+from ..eval.learned_minutiae import load_pyfing
 from ..robust import robust_sigma
 
 __all__ = ["pyfing_enhance", "LEARNED_ENHANCERS", "ENHANCERS"]
@@ -29,16 +28,6 @@ LEARNED_ENHANCERS = {"snfen": ("SNFOE", "SNFEN"), "gbfen": ("GBFOE", "GBFEN")}
 """Enhancer name -> (pyfing orientation method, pyfing enhancement method)."""
 ENHANCERS = ("gabor", *LEARNED_ENHANCERS)
 """Every print enhancer's name: the built-in Gabor filter (:func:`.enhance.gabor_enhance`), then pyfing's."""
-
-
-def _pyfing():
-    os.environ.setdefault("KERAS_BACKEND", "torch")  # before Keras is first imported: no TensorFlow needed
-    try:
-        import pyfing
-    except ImportError as error:
-        raise InputError("the learned print enhancers need pyfing and Keras 3: pip install 'fingersplat3d[learned]' "
-                         f"({error})") from None
-    return pyfing
 
 
 def as_fingerprint(texture: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -60,7 +49,7 @@ def pyfing_enhance(texture: np.ndarray, mask: np.ndarray, period: float, method:
 
     if method not in LEARNED_ENHANCERS:
         raise InputError(f"unknown learned enhancer {method!r}; choose from {sorted(LEARNED_ENHANCERS)}")
-    library = _pyfing()
+    library = load_pyfing()
     orientation_method, enhancement_method = LEARNED_ENHANCERS[method]
     inside = np.asarray(mask, bool)
     if not inside.any():

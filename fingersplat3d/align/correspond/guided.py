@@ -71,6 +71,18 @@ class GuidedMatches:
         return GuidedMatches(self.uv_a[keep], self.uv_b[keep], self.score[keep], self.information_a[keep],
                              self.information_b[keep], self.tried)
 
+    def swapped(self) -> "GuidedMatches":
+        """The same correspondences read from b to a."""
+        return GuidedMatches(self.uv_b, self.uv_a, self.score, self.information_b, self.information_a, self.tried)
+
+    def joined(self, other: "GuidedMatches") -> "GuidedMatches":
+        """These correspondences and ``other``'s (of the same two views, the same way round); their points searched
+        added up."""
+        return GuidedMatches(np.concatenate([self.uv_a, other.uv_a]), np.concatenate([self.uv_b, other.uv_b]),
+                             np.concatenate([self.score, other.score]),
+                             np.concatenate([self.information_a, other.information_a]),
+                             np.concatenate([self.information_b, other.information_b]), self.tried + other.tried)
+
     @classmethod
     def empty(cls) -> "GuidedMatches":
         return cls(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
