@@ -1,4 +1,5 @@
-"""``fs3d eval match``: the paper's matching experiment (mindtct minutiae, bozorth3 scores) as a command.
+"""``fs3d eval match``: the paper's matching experiment (mindtct minutiae, or pyfing's LEADER's; bozorth3 scores) as a
+command.
 
 Samples are photos named so that the finger and the capture can be read from the name (by
 default the UWA 3D/2D naming ``{subject}_{finger}_{capture}_{session}_{frame}``: finger =
