@@ -55,7 +55,7 @@ def _on_photo(photo_uv: np.ndarray, mask: np.ndarray) -> np.ndarray:
 def main() -> int:
     from fingersplat3d.align.correspond.texture import as_gray
     from fingersplat3d.eval.contact import ContactImage
-    from fingersplat3d.eval.fingerprint import analyse, match_score, nbis_available
+    from fingersplat3d.eval.fingerprint import MINUTIAE_EXTRACTORS, analyse, match_score, nbis_available
     from fingersplat3d.eval.machine import machine
     from fingersplat3d.eval.rolled_truth import START_PEAKS, located_minutiae, placed_minutiae, template_shift
     from fingersplat3d.io.images import read_image
@@ -67,7 +67,7 @@ def main() -> int:
     parser.add_argument("--size", default="1280x1024", help="the photos' size, WxH")
     parser.add_argument("--impose", type=Path, nargs="?", const=DEFAULT_IMPOSE, help="the IMPOSE sample's folder")
     parser.add_argument("--out", type=Path, help="folder to keep the prints in")
-    parser.add_argument("--minutiae", choices=("mindtct", "leader"), default="mindtct",
+    parser.add_argument("--minutiae", choices=MINUTIAE_EXTRACTORS, default="mindtct",
                         help="the minutiae located and compared by bozorth3 (on every print alike)")
     args = parser.parse_args()
     if not nbis_available():

@@ -27,7 +27,7 @@ from fingersplat3d.errors import run_script
 
 def main() -> int:
     from fingersplat3d.eval.contact import ContactImage
-    from fingersplat3d.eval.fingerprint import analyse, match_score
+    from fingersplat3d.eval.fingerprint import MINUTIAE_EXTRACTORS, analyse, match_score
     from fingersplat3d.eval.machine import machine
     from fingersplat3d.eval.rolled_truth import START_PEAKS, located_minutiae, template_shift
     from fingersplat3d.io.capture import read_capture, write_capture
@@ -43,7 +43,7 @@ def main() -> int:
     parser.add_argument("--scale", choices=("truth", "ridge"), default="truth")
     parser.add_argument("--out", type=Path, help="folder to keep the prints in")
     parser.add_argument("--enhance", default="gabor", help="the print's enhancer: gabor (default), or pyfing's snfen / gbfen")
-    parser.add_argument("--minutiae", choices=("mindtct", "leader"), default="mindtct",
+    parser.add_argument("--minutiae", choices=MINUTIAE_EXTRACTORS, default="mindtct",
                         help="the minutiae located and compared by bozorth3 (on the print and the true print alike)")
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
     args = parser.parse_args()

@@ -491,7 +491,7 @@ def _takes_short_end(alignment: GlobalAlignment, probe, config: RegistrationConf
     if sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
         return True
     rise = probe.shorter_loss_rise
-    return rise is not None and bool(np.isfinite(rise)) and rise < config.two_view_short_end_rise
+    return rise is not None and rise < config.two_view_short_end_rise  # a NaN rise compares False
 
 
 def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorrespondences], pairs, records: dict,

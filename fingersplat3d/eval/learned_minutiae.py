@@ -3,9 +3,9 @@
 ``pyfing`` (Cappelli's fingerprint library) ships LEADER's weights inside its wheel; Keras 3 runs it on the torch
 backend (no TensorFlow). :func:`leader_minutiae` gives what mindtct gives (:func:`.fingerprint.analyse`): each
 minutia's pixel, direction (degrees, counter-clockwise from +x with y up: LEADER's radians in mindtct's convention,
-checked on the same prints to a few degrees), kind and a 0-1 quality. Minutiae off ``mask`` (or, without one, on
-the print's white ground) are dropped, as mindtct's are by its own map (LEADER put none there on the prints measured,
-2-7 within 8 px of the skin's edge).
+checked on the same prints to a few degrees), kind and a 0-1 quality. Minutiae off the print's skin (its white
+ground, 255, as everywhere in the project) are dropped, as mindtct's are by its own map (LEADER put none there on the
+prints measured, 2-7 within 8 px of the skin's edge).
 
 Measured against mindtct (docs/measurements.md, stop 83; bozorth3 on the same extractor's minutiae both sides):
 mindtct stays the default. LEADER finds about half as many minutiae and locates the true ones as often or more
@@ -23,13 +23,10 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["MINUTIAE_EXTRACTORS", "load_pyfing", "leader_minutiae", "GROUND_GRAY"]
+__all__ = ["MINUTIAE_EXTRACTORS", "load_pyfing", "leader_minutiae"]
 
 MINUTIAE_EXTRACTORS = ("mindtct", "leader")
 """The minutiae bozorth3 compares (:func:`.fingerprint.analyse`): NIST's mindtct (the default) or LEADER."""
-
-GROUND_GRAY = 250
-"""A print's pixels this light or lighter are its ground (prints are white outside the finger)."""
 
 
 def load_pyfing():
@@ -43,10 +40,9 @@ def load_pyfing():
     return pyfing
 
 
-def leader_minutiae(image: np.ndarray, mask: np.ndarray | None = None, dpi: int = 500
-                    ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], np.ndarray]:
-    """``(xy [N, 2], angles_deg [N], kinds, quality [N])`` of the minutiae LEADER finds in an 8-bit print (ridges
-    dark, ~``dpi``), those on ``mask`` (default: the print's skin, lighter than :data:`GROUND_GRAY` excluded)."""
+def leader_minutiae(image: np.ndarray, dpi: int = 500) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], np.ndarray]:
+    """``(xy [N, 2], angles_deg [N], kinds, quality [N])`` of the minutiae LEADER finds on the skin of an 8-bit print
+    (ridges dark, white outside the finger, ~``dpi``)."""
     import cv2
     import torch
 
@@ -54,8 +50,7 @@ def leader_minutiae(image: np.ndarray, mask: np.ndarray | None = None, dpi: int 
     if image.dtype != np.uint8 or image.ndim != 2:
         raise ValueError(f"LEADER reads an 8-bit gray print, got {image.dtype} of shape {image.shape}")
     library = load_pyfing()
-    skin = (image < GROUND_GRAY) if mask is None else np.asarray(mask, bool)
-    skin = cv2.erode(skin.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    skin = cv2.erode((image < 255).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     with torch.no_grad():  # Keras on torch returns tensors that require grad, which pyfing reads with .numpy()
         found = library.minutiae_extraction(image, dpi, method="LEADER")
     height, width = image.shape
