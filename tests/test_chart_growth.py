@@ -40,6 +40,13 @@ def _matches(uv_a, uv_b):
     return GuidedMatches(uv_a, uv_b, np.ones(len(uv_a)), identity, identity.copy())
 
 
+def _searched(uv, skip):
+    """Which of the grid points ``uv`` a round searches: those ``skip`` (matches kept from before) does not hold."""
+    if skip is None or len(skip) == 0:
+        return np.ones(len(uv), bool)
+    return ~(np.abs(uv[:, None, :] - skip[None, :, :]).max(-1) < 1e-6).any(1)
+
+
 def test_the_correction_is_learned_from_the_matches_despite_wrong_ones(chart):
     uv = _grid()
     rng = np.random.default_rng(0)
@@ -77,14 +84,14 @@ def test_a_pair_of_few_matches_is_grown_through_a_lower_correction_where_the_cub
     plane_only = np.setdiff1d(np.arange(7), CORRECTIONS["plane"])
     tried = []
 
-    def match(predictor):
+    def match(predictor, skip=None):
         plane = not np.any(predictor.coefficients[plane_only])
         tried.append("plane" if plane else "other")
-        keep = np.arange(len(uv)) < (len(uv) if plane else first_count)
+        keep = (np.arange(len(uv)) < (len(uv) if plane else first_count)) & _searched(uv, None if skip is None else skip.uv_a)
         return _matches(uv[keep], _truth(chart, uv)[keep])
 
     first = _matches(uv[:first_count], _truth(chart, uv)[:first_count])
-    grown, rounds = grow_first_guess(chart, first, match, lambda m: m, min_matches=20, scale_px=1.0)
+    grown, rounds = grow_first_guess((chart,), first, match, lambda m: m, min_matches=20, scale_px=1.0)
     if first_count < FEW_MATCHES:
         assert len(grown) == len(uv) and rounds == 1
         assert tried == ["other", "plane", "other"]  # the cubic, then the plane, which grew; round 2 has many: the cubic
@@ -102,10 +109,10 @@ def _matcher(chart, search=12.0):
     ``search`` px of it."""
     uv = _grid()
 
-    def match(predictor):
+    def match(predictor, skip=None):
         predicted = predictor(uv)[0]
         truth = _truth(chart, uv)
-        near = np.linalg.norm(predicted - truth, axis=1) <= search
+        near = (np.linalg.norm(predicted - truth, axis=1) <= search) & _searched(uv, None if skip is None else skip.uv_a)
         return _matches(uv[near], truth[near])
 
     return match
@@ -114,7 +121,7 @@ def _matcher(chart, search=12.0):
 def test_growth_reaches_the_skin_the_chart_alone_missed(chart):
     match = _matcher(chart, search=4.0)
     first = match(chart)
-    grown, rounds = grow_first_guess(chart, first, match, lambda m: m, min_matches=20, scale_px=1.0)
+    grown, rounds = grow_first_guess((chart,), first, match, lambda m: m, min_matches=20, scale_px=1.0)
     total = len(_grid())
     assert len(first) < 0.8 * total  # the chart alone reaches the middle only
     assert len(grown) > 0.97 * total and 1 <= rounds <= GROWTH_ROUNDS
@@ -123,13 +130,63 @@ def test_growth_reaches_the_skin_the_chart_alone_missed(chart):
 def test_a_chart_that_was_right_is_not_grown(chart):
     uv = _grid()
     first = _matches(uv, chart(uv)[0])
-    grown, rounds = grow_first_guess(chart, first, lambda predictor: _matches(uv, predictor(uv)[0]), lambda m: m,
-                                     min_matches=20, scale_px=1.0)
+    def match(predictor, skip=None):
+        searched = _searched(uv, None if skip is None else skip.uv_a)
+        return _matches(uv[searched], predictor(uv[searched])[0])
+
+    grown, rounds = grow_first_guess((chart,), first, match, lambda m: m, min_matches=20, scale_px=1.0)
     assert rounds == 0 and grown is first
 
 
 def test_a_pair_the_chart_did_not_register_is_not_grown(chart):
     match = _matcher(chart, search=4.0)
     first = match(chart)
-    grown, rounds = grow_first_guess(chart, first, match, lambda m: m, min_matches=len(first) + 1, scale_px=1.0)
+    grown, rounds = grow_first_guess((chart,), first, match, lambda m: m, min_matches=len(first) + 1, scale_px=1.0)
     assert rounds == 0 and grown is first
+
+
+def test_a_pair_matched_both_ways_grows_each_way_in_its_own_views_chart(chart):
+    """Both ways (``RegistrationConfig.first_guess_both_ways``): a grid on b is predicted in a through the inverse
+    shift, and its correction is learned from the same matches read from b (in b's chart coordinates)."""
+    back = ChartPredictor(chart.chart_b, chart.chart_a, ChartShift(-chart.shift.turn, -chart.shift.d_sigma, 50, 200, 3.0))
+    on_a = _grid()
+    from_b = _grid() + 3.0  # skin points of a whose true places in b make b's grid
+    on_b = _truth(chart, from_b)
+    search = 4.0
+
+    def match(forward, backward, skip=None):
+        near_b = ((np.linalg.norm(forward(on_a)[0] - _truth(chart, on_a), axis=1) <= search)
+                  & _searched(on_a, None if skip is None else skip.uv_a))
+        near_a = ((np.linalg.norm(backward(on_b)[0] - from_b, axis=1) <= search)
+                  & _searched(on_b, None if skip is None else skip.uv_b))
+        return _matches(on_a[near_b], _truth(chart, on_a)[near_b]).joined(_matches(on_b[near_a], from_b[near_a]).swapped())
+
+    first = match(chart, back)
+    reached_back = np.isin(first.uv_b[:, 0], on_b[:, 0]).sum()
+    assert reached_back < 0.8 * len(on_b)  # the inverse chart misses the flanks as the chart does
+    grown, rounds = grow_first_guess((chart, back), first, match, lambda m: m, min_matches=20, scale_px=1.0)
+    assert len(grown) > 0.97 * (len(on_a) + len(on_b)) and 1 <= rounds <= GROWTH_ROUNDS
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_robust_fit_reaches_scipys_cauchy_least_squares(chart, seed):
+    """The correction's own reweighted least squares against scipy's trust region on the same loss (its reference)."""
+    from scipy.optimize import least_squares
+
+    from fingersplat3d.align.correspond.chart_growth import _cauchy_least_squares
+
+    rng = np.random.default_rng(seed)
+    design = np.column_stack([np.ones(300), rng.normal(size=(300, 4))])
+    target = design @ rng.normal(size=(5, 2)) + rng.normal(0.0, 0.3, (300, 2))
+    target[rng.random(300) < 0.25] += rng.uniform(5.0, 20.0, 2)  # a quarter of the matches wrong
+    start = np.linalg.lstsq(design, target, rcond=None)[0]
+    ours = _cauchy_least_squares(design, target, start, 1.0)
+    reference = least_squares(lambda flat: (design @ flat.reshape(5, 2) - target).ravel(), start.ravel(),
+                              jac=lambda flat: np.kron(design, np.eye(2)), loss="cauchy", f_scale=1.0, method="trf",
+                              xtol=1e-12, ftol=1e-12, gtol=1e-12).x.reshape(5, 2)
+    np.testing.assert_allclose(ours, reference, atol=1e-6)
+
+    def loss(x):
+        return np.log1p(((design @ x - target) / 1.0) ** 2).sum()
+
+    assert loss(ours) <= loss(reference) + 1e-9 and loss(ours) < loss(start)

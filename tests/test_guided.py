@@ -137,3 +137,20 @@ def test_a_bent_map_is_matched_without_bias_through_its_curvature(textures):
         outward = np.sign(matches.uv_a[:, 1] - middle)  # the foreshortening grows away from the middle
         bias[curvature] = float(np.mean(offset[:, 1] * outward))
     assert abs(bias[True]) < 0.05 < 0.15 < abs(bias[False]), bias  # measured -0.001 and -0.24 px
+
+
+def test_points_matched_already_are_left_out_and_the_rest_match_as_before(textures):
+    """``skip``: a growth round searches only the grid points not verified before (align/correspond/chart_growth.py)."""
+    texture, mask, warped, warped_mask, period = textures
+    maps_a, maps_b = RidgeMaps(texture, mask), RidgeMaps(warped, warped_mask)
+    every = match_guided(maps_a, maps_b, affine(), period, search=0.7 * period)
+    done = every.subset(np.arange(len(every)) % 3 == 0)
+    rest = match_guided(maps_a, maps_b, affine(), period, search=0.7 * period, skip=done.uv_a)
+    assert rest.tried == every.tried - len(done) and len(rest) == len(every) - len(done)
+    assert not np.isin(rest.uv_a[:, 0] * 1e4 + rest.uv_a[:, 1], done.uv_a[:, 0] * 1e4 + done.uv_a[:, 1]).any()
+    kept = np.arange(len(every)) % 3 != 0
+    np.testing.assert_array_equal(rest.uv_b, every.uv_b[kept])  # the others' matches are untouched
+    nothing = match_guided(maps_a, maps_b, affine(), period, search=0.7 * period, skip=every.uv_a)
+    assert len(nothing) == 0 and nothing.tried == every.tried - len(every)
+    off_image = np.array([[-5.0, 3.0], [np.nan, 1.0]])  # pixels off the grid, or not numbers, skip nothing
+    assert match_guided(maps_a, maps_b, affine(), period, search=0.7 * period, skip=off_image).tried == every.tried

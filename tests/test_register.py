@@ -33,9 +33,10 @@ def test_three_synthetic_views_register_within_a_few_degrees(uwa640):
 
 
 def test_the_photos_order_does_not_move_the_turns_or_the_focal(uwa640):
-    """The guided rounds match each pair from a grid on either view, so the same photos given in the reverse order
-    give the same cameras (measured on the shipped sample: 0.04 degrees and 0.4 % apart over its six orders, 0.41
-    degrees and 2.5 % with each pair matched from its first view alone)."""
+    """The first guesses and the guided rounds match each pair from a grid on either view, so the same photos given in
+    the reverse order give the same cameras (measured on the shipped sample: its six orders within 0.009 degrees and
+    0.04 % of focal; 0.04 degrees with the first guesses matched from their first view alone, 0.41 degrees and 2.5 %
+    with the guided rounds too)."""
     forward = _register(uwa640.views)
     backward = _register(uwa640.views[::-1])
     ahead = [np.asarray(pose) for pose in forward.alignment.world_to_cam]
@@ -69,9 +70,9 @@ def test_two_views_with_the_focal_held_take_rounds_until_their_turn_settles(uwa6
     (more carried ill-determined turns further off), and three views keep two rounds (docs/measurements.md, stop 74)."""
     from fingersplat3d.align.solve.global_opt import GlobalAlignConfig
 
-    views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; focal held, its rounds turn it 1.95 / 0.51 / 0.03 degrees
+    views = [uwa640["left"], uwa640["right"]]  # 90 degrees apart; focal held, its rounds turn it 1.26 / 0.25 / 0.004 degrees
     held = GlobalAlignConfig(optimize_focal=False)
-    config = RegistrationConfig(global_align=held)
+    config = RegistrationConfig(global_align=held, settled_turn_deg=0.1)  # the second round's turn not settled at this
     settled = _register(views, config)
     assert len(settled.turn_changes_deg) == settled.rounds > config.guided_rounds
     assert settled.turn_changes_deg[-1] <= config.settled_turn_deg or settled.rounds == config.guided_rounds + config.extra_rounds

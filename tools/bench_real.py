@@ -1,14 +1,15 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
-                                [--two-views] [--focal-px F] [--crop-tip [SHARE]]
+                                [--two-views] [--focal-px F] [--crop-tip [SHARE]] [--orders]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
 table of docs/measurements.md and the machine it ran on. With ``--crop-tip``, each capture is also fused with its
 photos cropped about their centres, the fingertip outside the frame
 (:func:`fingersplat3d.experiments.real_crops.crop_without_tip`, in memory), and the crops' turns are measured against
-the whole captures' rig mean.
+the whole captures' rig mean. With ``--orders``, instead, each capture is fused once per order of its photos (six,
+:mod:`fingersplat3d.experiments.orders`): the rig table of each order and how far each capture moves with the order.
 """
 from __future__ import annotations
 
@@ -32,6 +33,17 @@ def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px
     config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
                         focal_px=focal_px)
     return measure_real(capture, config, leave_one_out=True, two_views=two_views) | {"capture": job.name}
+
+
+def _measure_orders(job, guided_rounds: int, ridge_px: float, focal_px: float | None) -> dict:
+    from fingersplat3d.align.register import RegistrationConfig
+    from fingersplat3d.experiments.orders import in_every_order
+    from fingersplat3d.io.jobs import load_job
+    from fingersplat3d.pipeline import FuseConfig
+
+    config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
+                        focal_px=focal_px)
+    return {order: record | {"capture": job.name} for order, record in in_every_order(load_job(job), config).items()}
 
 
 def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float | None, share: float) -> dict | None:
@@ -72,6 +84,9 @@ def main() -> int:
     parser.add_argument("--crop-tip", type=float, nargs="?", const=0.3, metavar="SHARE",
                         help="also fuse every capture cropped about its centre with the fingertip and SHARE (default 0.3) "
                              "of the finger's width behind it outside the frame, against the whole captures' rig")
+    parser.add_argument("--orders", action="store_true",
+                        help="instead: fuse every capture with its photos in each of their orders and report how far the "
+                             "result moves with the order")
     args = parser.parse_args()
     if args.crop_tip is not None and not 0.0 <= args.crop_tip <= 2.0:
         print(f"bench_real: --crop-tip {args.crop_tip:g}: the share of the finger's width cut behind the tip must lie "
@@ -81,6 +96,8 @@ def main() -> int:
         print(f"bench_real: {args.data}: no such folder (the real dev captures live in ../shared/data/uwa-real-dev)",
               file=sys.stderr)
         return 2
+    if args.orders:
+        return _orders(args)
     records = []
     for job in list_jobs([args.data], args.select):
         records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px, args.two_views, args.focal_px))
@@ -120,6 +137,28 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary, "cropped": cropped},
                                         indent=1, default=float))
+    return 0
+
+
+def _orders(args) -> int:
+    from fingersplat3d.eval.machine import machine
+    from fingersplat3d.experiments.orders import order_spread, orders_table
+    from fingersplat3d.experiments.process import in_fresh_process
+    from fingersplat3d.io.jobs import list_jobs
+
+    by_capture = {}
+    for job in list_jobs([args.data], args.select):
+        by_capture[job.name] = in_fresh_process(_measure_orders, job, args.guided_rounds, args.ridge_px, args.focal_px)
+        spread = order_spread(by_capture[job.name])
+        print(f"{job.name}: {spread['registered_orders']} of {len(by_capture[job.name])} orders whole, turns within "
+              f"{spread['turn_deg']:.2f}°, focal within {100 * spread['focal']:.1f} %", file=sys.stderr, flush=True)
+    info = machine()
+    print(f"Machine: {info['cpu']}, {info['cores']} cores, load {info['load'][0]:.2f}; torch {info['torch']}; "
+          f"{len(by_capture)} captures of {args.data.name}, each in every order of its photos, geometry only, "
+          f"{args.guided_rounds} guided rounds, {args.ridge_px:g} px per ridge (0: photo resolution).\n")
+    print(orders_table(by_capture))
+    if args.json:
+        args.json.write_text(json.dumps({"machine": info, "orders": by_capture}, indent=1, default=float))
     return 0
 
 

@@ -5,7 +5,8 @@ The loop (all numbers scale with the measured ridge period):
 1. **first guess of each pair** (``matcher='surface'``, the default): both views' ridge textures
    unwrapped on their cylinder charts, their shift voted by patches
    (:mod:`~fingersplat3d.align.correspond.chart_shift`), and guided matching through the charts with a
-   search of two ridge periods (:mod:`~fingersplat3d.align.correspond.guided`); the classic matchers
+   search of two ridge periods (:mod:`~fingersplat3d.align.correspond.guided`), from a grid on each view of the pair
+   (``first_guess_both_ways``), grown through the charts corrected by those matches; the classic matchers
    (``minutiae``, ``sift``, ...) of :mod:`~fingersplat3d.align.correspond.features` can stand in for it. From
    ``many_views`` views on, a pair whose views are each registered with ``first_guesses_per_view`` others already is
    left to the guided rounds (step 4);
@@ -51,7 +52,7 @@ from ..segment.side_cut import capture_frames
 from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, silhouette_frame
 from .correspond.chart import CylinderChart
 from .correspond.chart_growth import grow_first_guess
-from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, chart_shift_candidates,
+from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, ChartShift, chart_shift_candidates,
                                      estimate_chart_shift)
 from .correspond.contours import contour_correspondences
 from .correspond.epipolar import fundamental_inliers
@@ -160,15 +161,24 @@ def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: Reg
     large), searched ``first_search`` ridge periods around, then grown through the charts corrected by those matches
     (:mod:`~fingersplat3d.align.correspond.chart_growth`, ``RegistrationConfig.grow_first_guess``)."""
     chart = ChartPredictor(charts[a], charts[b], shift, zoom)
+    if config.first_guess_both_ways:  # b's grid read through the inverse shift: sigma_a = (sigma_b - zoom d) / zoom
+        back = ChartShift(-shift.turn, -zoom * shift.d_sigma, shift.support, shift.patches, shift.ratio)
+        ways = (chart, ChartPredictor(charts[b], charts[a], back, 1.0 / zoom))
+        stride = np.sqrt(2.0) * prepared.period
+    else:
+        ways, stride = (chart,), None
 
-    def match(predictor) -> GuidedMatches:
-        return match_guided(prepared.maps[a], prepared.maps[b], predictor, prepared.period,
-                            config.first_search * prepared.period)
+    def match(*predictors, skip: GuidedMatches | None = None) -> GuidedMatches:
+        done = (None, None) if skip is None else (skip.uv_a, skip.uv_b)  # each way's grid points matched already
+        found = [match_guided(prepared.maps[x], prepared.maps[y], predictor, prepared.period,
+                              config.first_search * prepared.period, stride=stride, skip=matched)
+                 for predictor, (x, y), matched in zip(predictors, ((a, b), (b, a)), done)]
+        return found[0] if len(found) == 1 else found[0].joined(found[1].swapped())
 
-    first = match(chart)
+    first = match(*ways)
     if not config.grow_first_guess:
         return first
-    grown, _ = grow_first_guess(chart, first, match, lambda m: _verified(m, prepared.period, config), config.min_matches,
+    grown, _ = grow_first_guess(ways, first, match, lambda m: _verified(m, prepared.period, config), config.min_matches,
                                 0.1 * prepared.period)
     return grown
 

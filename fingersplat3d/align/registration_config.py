@@ -69,6 +69,14 @@ class RegistrationConfig:
     0.86 / 0.87 -> 0.58 / 0.71 / 0.81 degrees (in the rig's own order within its noise), two views with the focal
     fitted 7.3 / 6.1 -> 5.1 / 5.8, the warp check's ridge NCC 0.51 -> 0.54; synthetic 3 and 5 views the same or
     better."""
+    first_guess_both_ways: bool = True
+    """Each pair's first guess (through its cylinder charts, and its growth) is matched both ways too, a grid on either
+    view sqrt(2) ridge periods apart, b's predicted in a through the inverse shift and grown through a correction of its
+    own (:func:`~fingersplat3d.align.correspond.chart_growth.grow_first_guess`). From a's grid alone, the two guided
+    rounds started from an order-dependent first alignment: a real capture's six orders still moved its turns by
+    0.14-1.00 degrees (median of nine 0.51) and its focal by up to 4.7 %; both ways, 0.10-0.70 degrees (median 0.21) and
+    up to 3.0 %; the rig's figures and the focal spread (7 %) as good or better in every order (docs/measurements.md,
+    stop 84; ``tools/bench_real.py --orders``)."""
     min_matches: int = 40
     """Verified correspondences a pair needs to count as registered."""
     min_agreement: float = 0.125

@@ -155,6 +155,16 @@ def _grid(maps: RidgeMaps, half: int, stride: float) -> np.ndarray:
     return grid[inner[grid[:, 1].astype(int), grid[:, 0].astype(int)]]
 
 
+def _on_points(grid: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``[N]`` whether each grid point lies within a hundredth of a pixel of one of ``points``."""
+    points = points[np.isfinite(points).all(1) & (points >= 0.0).all(1)]
+    if len(points) == 0:
+        return np.zeros(len(grid), bool)
+    keys = [np.round(np.asarray(xy) * 100.0).astype(np.int64) for xy in (grid, points)]
+    width = int(max(keys[0][:, 0].max(), keys[1][:, 0].max())) + 1
+    return np.isin(keys[0][:, 1] * width + keys[0][:, 0], keys[1][:, 1] * width + keys[1][:, 0])
+
+
 def _parabola(left, centre, right) -> float:
     """Sub-pixel offset of a peak from its two neighbours (float32 scores), within half a pixel. Python's min and max,
     not ``np.clip``: the same value, a tenth of the cost, and it runs twice for every point searched."""
@@ -227,18 +237,22 @@ def predict_with_curvature(predictor: Predictor, uv: np.ndarray, reach: float,
 
 def match_guided(maps_a: RidgeMaps, maps_b: RidgeMaps, predictor: Predictor, period: float, search: float, *, stride: float | None = None,
                  min_score: float = MIN_SCORE, min_uniqueness: float = MIN_UNIQUENESS,
-                 patch_periods: float = PATCH_PERIODS, curvature: bool = True) -> GuidedMatches:
+                 patch_periods: float = PATCH_PERIODS, curvature: bool = True,
+                 skip: np.ndarray | None = None) -> GuidedMatches:
     """Matches of a grid of ``a`` (every ``stride`` pixels, default one period) searched ``search`` px around the predictions,
     with patches of half-size ``patch_periods`` ridge periods.
 
     ``maps_*`` hold the ridge textures (:func:`fingersplat3d.align.texture.ridge_texture`) and the
     finger masks; a point is tried when its patch lies on the finger in a and its
     prediction, seen by b, lies on the finger in b with a non-degenerate local map. ``curvature=False`` resamples b
-    through the predictor's affine map alone (before stop 73; kept for tools/bench_guided_bias.py).
+    through the predictor's affine map alone (before stop 73; kept for tools/bench_guided_bias.py). ``skip``: pixels
+    ``[K, 2]`` of a whose grid points are left out (matched already; within a hundredth of a pixel).
     """
     half = max(3, int(round(patch_periods * period)))
     search = max(1, int(round(search)))
     grid = _grid(maps_a, half, stride or period)
+    if skip is not None and len(skip) and len(grid):
+        grid = grid[~_on_points(grid, np.asarray(skip, np.float64))]
     if len(grid) == 0:
         return GuidedMatches.empty()
     prediction, jacobian, seen = predict_with_jacobian(predictor, grid)

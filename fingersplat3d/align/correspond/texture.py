@@ -88,7 +88,9 @@ def measure_ridge_period(gray: np.ndarray, mask: np.ndarray | None = None, min_p
     tile = min(_TILE, extent - 2 * margin)
     if tile < 16:
         return None
-    high_pass = gray - cv2.GaussianBlur(gray, (0, 0), max_period / 2.0)
+    # The shading blurred in float32 (a fifth of float64's time at 1280x1024: 0.03 against 0.15 s; it is only
+    # subtracted, and its rounding is far below a photo's 8 bits)
+    high_pass = gray - cv2.GaussianBlur(gray.astype(np.float32), (0, 0), max_period / 2.0)
     window = np.outer(np.hanning(tile), np.hanning(tile))
     yy, xx = np.indices((_FFT, _FFT))
     radius = np.hypot(yy - _FFT // 2, xx - _FFT // 2)
