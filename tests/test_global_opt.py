@@ -115,3 +115,29 @@ def test_two_views_keep_stiffer_fields(capture):
                                        _state_of(solved), solved.aligned, solved.root)
         assert problem.field_smoothness == expected
     assert config.two_view_field_smoothness > config.field_smoothness
+
+
+def test_three_views_of_which_two_stand_in_one_place_keep_the_two_view_fields(capture):
+    """Two views a degree apart hold no more relief than one: beside a third, the fields stay as stiff as two views'
+    (another group's renders at rolls 47 and 48 with a third, docs/measurements.md, stop 84); the pivot and the turn
+    bound keep the view count."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from fingersplat3d.align.solve.global_opt import _state_of, alignment_problem, field_grids
+
+    rng = np.random.default_rng(0)
+    config = GlobalAlignConfig()
+    depths = [v.depth for v in capture.views]
+    focal = capture.views[0].camera.K[0, 0]
+    pairs = [_exact_pair(capture, a, b, rng) for a, b in ((0, 1), (1, 2))]
+    solved = global_align(depths, focal, pairs, config)
+    state = _state_of(solved)
+    rotations = np.asarray(state.rotations, np.float64).copy()  # cam_to_world: view 2 one degree from view 1
+    rotations[2] = Rotation.from_euler("y", 1.0, degrees=True).as_matrix() @ rotations[1]
+    for initial, expected in ((state, config.field_smoothness), (replace(state, rotations=rotations),
+                                                                  config.two_view_field_smoothness)):
+        problem, _ = alignment_problem(depths, np.full(3, focal), pairs, config, field_grids(depths, config), initial,
+                                       solved.aligned, solved.root)
+        assert problem.field_smoothness == expected and problem.pivot is not None

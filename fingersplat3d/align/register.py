@@ -66,7 +66,7 @@ from .solve.global_opt import (PIVOT_MIN_VIEWS, GlobalAlignment, PairCorresponde
 from .solve.photometric import refine_alignment
 from .solve.rig import Rig, rig_align
 from .solve.sensitivity import focal_probe, short_end
-from .transfer import MIN_PARALLAX_DEG
+from .transfer import distinct_viewpoints
 from .width_check import least_turns_deg
 
 __all__ = ["RegistrationConfig", "Registration", "register_views", "distinct_viewpoints", "weak_view", "MATCHERS"]
@@ -259,20 +259,6 @@ def _contours(alignment, prepared: _Prepared, config: RegistrationConfig, on_rig
                 found.append(PairCorrespondences(a, b, uv_a, uv_b, np.full(len(uv_a), config.contour_weight), np.eye(4),
                                                  np.zeros_like(information), information))
     return found
-
-
-def distinct_viewpoints(world_to_cam, views) -> int:
-    """How many of ``views`` see the finger from distinct places: each counts unless its optical axis lies within
-    :data:`~fingersplat3d.align.transfer.MIN_PARALLAX_DEG` (the parallax that backs a depth) of a view counted before
-    (a turn about the optical axis alone, a portrait-stored photo, is the same place)."""
-    cosine = np.cos(np.radians(MIN_PARALLAX_DEG))
-    counted: list[np.ndarray] = []
-    for v in views:
-        axis = np.asarray(world_to_cam[v], np.float64)[2, :3]  # the camera's viewing direction in the world
-        axis = axis / np.linalg.norm(axis)
-        if all(float(axis @ other) < cosine for other in counted):
-            counted.append(axis)
-    return len(counted)
 
 
 def _pair_correspondences(a: int, b: int, matches: GuidedMatches, b_to_a: np.ndarray, cap: int = 0) -> PairCorrespondences:

@@ -21,7 +21,7 @@ import numpy as np
 from ..sampling import sample_nearest
 from ..scene import Camera
 
-__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "backed_shares",
+__all__ = ["STATUSES", "MIN_PARALLAX_DEG", "distinct_viewpoints", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "backed_shares",
            "multi_view_support"]
 
 STATUSES = ("mapped", "off_surface", "outside", "hidden")
@@ -92,6 +92,20 @@ MIN_PARALLAX_DEG = 5.0
 (the same photo moved, a burst from a tripod) see the same skin but say nothing of its depth; at 5 degrees, with
 0.3 px of matching error, a real capture's depth (60 mm away, focal 1660 px) is pinned to ~0.12 mm, the synthetic
 target's order."""
+
+
+def distinct_viewpoints(world_to_cam, views) -> int:
+    """How many of ``views`` see the finger from distinct places: each counts unless its optical axis lies within
+    :data:`MIN_PARALLAX_DEG` (the parallax that backs a depth) of a view counted before
+    (a turn about the optical axis alone, a portrait-stored photo, is the same place)."""
+    cosine = np.cos(np.radians(MIN_PARALLAX_DEG))
+    counted: list[np.ndarray] = []
+    for v in views:
+        axis = np.asarray(world_to_cam[v], np.float64)[2, :3]  # the camera's viewing direction in the world
+        axis = axis / np.linalg.norm(axis)
+        if all(float(axis @ other) < cosine for other in counted):
+            counted.append(axis)
+    return len(counted)
 
 
 def multi_view_backing(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool], stride: int = 4,

@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
 
 from ...device import single_threaded
 from ...sampling import sample_bilinear
+from ..transfer import distinct_viewpoints
 from .alignment_problem import AlignmentProblem, Correspondences, InitialState, median_depth
 from .depth_field import FieldGrid
 from .levenberg import levenberg_marquardt, turn_uncertainty_deg
@@ -244,10 +245,17 @@ def alignment_problem(depths: Sequence[np.ndarray], guesses: np.ndarray, pairs: 
     data = _correspondences(depths, pairs, aligned)
     free = [aligned[v] and v != root for v in range(len(depths))]
     closed = sum(aligned) >= PIVOT_MIN_VIEWS  # three views or more: the bas-relief valley closed
+    # The fields bend freely only where three of the views see the finger from distinct places (optical axes
+    # MIN_PARALLAX_DEG apart): two views a degree apart hold no more relief than one, and beside a third, counted as
+    # three, soft fields let the turns follow the relief (another group's renders at rolls 47 and 48 with a third:
+    # 0.4 -> 4.4 degrees from stop 78 to 83). The pivot and the turn bound keep the view count (switched with the
+    # fields, those triplets came out 8-27 degrees off).
+    bending = distinct_viewpoints([np.asarray(r).T for r in initial.rotations],
+                                  [v for v in range(len(depths)) if aligned[v]]) >= PIVOT_MIN_VIEWS
     problem = AlignmentProblem(depths, grids, data, initial, free, shared_focal=config.shared_focal,
                                optimize_focal=config.optimize_focal and len(data.weight) > 0, focal_guess=guesses,
                                robust_px=config.robust_px, alpha_prior=config.alpha_prior,
-                               field_smoothness=config.field_smoothness if closed else config.two_view_field_smoothness,
+                               field_smoothness=config.field_smoothness if bending else config.two_view_field_smoothness,
                                field_prior=config.field_prior, focal_prior=config.focal_prior,
                                shared_relief=config.shared_relief, min_turns=min_turns,
                                turn_bound_weight=config.turn_bound_weight if closed else config.two_view_turn_bound_weight,

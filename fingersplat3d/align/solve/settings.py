@@ -34,7 +34,8 @@ class GlobalAlignConfig:
     field_knots: float = 8.0
     """Knot intervals of each view's depth field across the finger's short side (0 = no field)."""
     field_smoothness: float = 0.002
-    """Bending penalty of the depth fields, with three views or more aligned (:data:`PIVOT_MIN_VIEWS`). Where the
+    """Bending penalty of the depth fields, with three views or more aligned (:data:`PIVOT_MIN_VIEWS`) that see the
+    finger from three distinct places (:func:`~fingersplat3d.align.transfer.distinct_viewpoints`). Where the
     finger's section is not the pointmap prior's, the fields must bend to take the difference up; held stiff
     (0.05 until stop 78), the turns, the relief and the focal took it instead. Measured (docs/measurements.md, stop
     78): real captures, every camera pair 0.78 -> 0.68 degrees from the rig's mean (the held-out finger 1.06 / 1.16 /
@@ -42,9 +43,11 @@ class GlobalAlignConfig:
     off; sections unlike the prior's and close-ups the frame cuts (synthetic) fewer turns off by degrees; a finger of the
     prior's own section 0.01 mm more depth error (0.042 -> 0.052 mm)."""
     two_view_field_smoothness: float = 0.05
-    """The same penalty with two views aligned: their bas-relief valley is open, and stiffer fields keep them where
-    the pair's own similarity put them (synthetic ring and CFPose, two views: 0.002 moved the turns by degrees either
-    way and doubled the depth error of some)."""
+    """The same penalty with two views aligned, or more from only two distinct places: their bas-relief valley is open,
+    and stiffer fields keep them where the pair's own similarity put them (synthetic ring and CFPose, two views: 0.002
+    moved the turns by degrees either way and doubled the depth error of some; another group's renders at rolls 47 and
+    48, a degree apart, with a third view: worst pairs 1.7-4.4 degrees soft, 0.1-4.1 stiff, five of seven within 2
+    against one, docs/measurements.md stop 84)."""
     field_prior: float = 1e-4
     """Pull of the field coefficients toward 0 (keeps coefficients no correspondence reaches bounded)."""
     robust_px: float = 1.0
