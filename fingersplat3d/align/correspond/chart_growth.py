@@ -14,9 +14,10 @@ So the matches the chart gave, which are right, are used to learn it: a low-orde
 fitted to the verified matches' offsets from the chart's prediction by robust least squares, is added to the
 prediction, and the pair is matched again with the same search. Each round reaches skin a little farther from where the
 chart was right; the rounds stop when the verified matches no longer grow. A round searches only the points not
-verified before and keeps the verified ones as they were: searched again through a correction fitted to them, they
-land where they did, at the cost of half a round's matching (about 0.6 s of a real capture's geometry). Where the chart was right, the correction
-stays near zero and so do the matches.
+verified before and keeps the verified ones as they were (searched again through a correction fitted to them, they
+cost half a round's matching, about 0.6 s of a real capture's geometry, for registrations the same within their
+noise: docs/measurements.md, stop 84). Where the chart was right, the correction stays near zero and so do the
+matches.
 
 Which polynomial is a question of reach. The first matches of a wide pair (60-90) lie in a band mid-pad, and the
 correction is needed beyond it: there a cubic fitted to that band can swing a ridge period or more off, while a plane
