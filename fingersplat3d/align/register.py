@@ -161,19 +161,13 @@ def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: Reg
     large), searched ``first_search`` ridge periods around, then grown through the charts corrected by those matches
     (:mod:`~fingersplat3d.align.correspond.chart_growth`, ``RegistrationConfig.grow_first_guess``)."""
     chart = ChartPredictor(charts[a], charts[b], shift, zoom)
+    ways = (chart,)
     if config.first_guess_both_ways:  # b's grid read through the inverse shift: sigma_a = (sigma_b - zoom d) / zoom
         back = ChartShift(-shift.turn, -zoom * shift.d_sigma, shift.support, shift.patches, shift.ratio)
-        ways = (chart, ChartPredictor(charts[b], charts[a], back, 1.0 / zoom))
-        stride = np.sqrt(2.0) * prepared.period
-    else:
-        ways, stride = (chart,), None
+        ways += (ChartPredictor(charts[b], charts[a], back, 1.0 / zoom),)
 
     def match(*predictors, skip: GuidedMatches | None = None) -> GuidedMatches:
-        done = (None, None) if skip is None else (skip.uv_a, skip.uv_b)  # each way's grid points matched already
-        found = [match_guided(prepared.maps[x], prepared.maps[y], predictor, prepared.period,
-                              config.first_search * prepared.period, stride=stride, skip=matched)
-                 for predictor, (x, y), matched in zip(predictors, ((a, b), (b, a)), done)]
-        return found[0] if len(found) == 1 else found[0].joined(found[1].swapped())
+        return _matched(prepared, a, b, predictors, config.first_search * prepared.period, skip)
 
     first = match(*ways)
     if not config.grow_first_guess:
@@ -181,6 +175,19 @@ def _chart_guess(prepared: _Prepared, a: int, b: int, charts, shift, config: Reg
     grown, _ = grow_first_guess(ways, first, match, lambda m: _verified(m, prepared.period, config), config.min_matches,
                                 0.1 * prepared.period)
     return grown
+
+
+def _matched(prepared: _Prepared, a: int, b: int, predictors, search: float,
+             skip: GuidedMatches | None = None) -> GuidedMatches:
+    """The pair matched through ``predictors``, searched ``search`` px around: a to b alone (one predictor, a grid on a
+    a ridge period apart), or both ways (two, a to b and b to a: a grid on each view sqrt(2) periods apart, as many
+    points as one grid a period apart), read from a to b. ``skip``: matches held already, whose grid points each way
+    leaves out."""
+    stride = None if len(predictors) == 1 else np.sqrt(2.0) * prepared.period
+    held = (None, None) if skip is None else (skip.uv_a, skip.uv_b)
+    found = [match_guided(prepared.maps[x], prepared.maps[y], predictor, prepared.period, search, stride=stride,
+                          skip=points) for predictor, (x, y), points in zip(predictors, ((a, b), (b, a)), held)]
+    return found[0] if len(found) == 1 else found[0].joined(found[1].swapped())
 
 
 def turn_change_deg(old: GlobalAlignment, new: GlobalAlignment) -> float:
@@ -203,15 +210,9 @@ def _through_model(prepared: _Prepared, alignment: GlobalAlignment, a: int, b: i
                    config: RegistrationConfig) -> tuple[GuidedMatches, GuidedMatches, float]:
     """A pair matched through the 3D model of ``alignment``: the matches, the verified ones, and their agreement (the
     verified share of the points searched; 0 where none was)."""
-    def matched(x: int, y: int, stride: float | None = None) -> GuidedMatches:
-        return match_guided(prepared.maps[x], prepared.maps[y], ModelPredictor.from_alignment(alignment, x, y),
-                            prepared.period, config.guided_search * prepared.period, stride=stride)
-
-    if config.guided_both_ways:  # a grid on each view, sqrt(2) periods apart: as many points as one grid a period apart
-        stride = np.sqrt(2.0) * prepared.period
-        matches = matched(a, b, stride).joined(matched(b, a, stride).swapped())
-    else:
-        matches = matched(a, b)
+    ways = ((a, b), (b, a)) if config.guided_both_ways else ((a, b),)
+    matches = _matched(prepared, a, b, [ModelPredictor.from_alignment(alignment, x, y) for x, y in ways],
+                       config.guided_search * prepared.period)
     verified = _verified(matches, prepared.period, config)
     return matches, verified, len(verified) / max(matches.tried, 1)
 

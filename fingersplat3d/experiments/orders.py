@@ -24,9 +24,8 @@ def _order_key(order) -> str:
 def in_every_order(capture, config=None) -> dict[str, dict]:
     """Per order of the capture's views (key ``"021"``: views 0, 2, 1 given in that order): the fuse's record, its
     ``world_to_cam``, ``sizes`` and ``angles_deg`` in the capture's own view order."""
-    from ..eval.poses import rotation_angle_deg
     from ..scene import Capture
-    from .real import measure_real
+    from .real import measure_real, pair_angles_deg
 
     count = len(capture.views)
     records = {}
@@ -35,9 +34,7 @@ def in_every_order(capture, config=None) -> dict[str, dict]:
         position = {view: k for k, view in enumerate(order)}  # where the capture's view lies in the order given
         for key in ("world_to_cam", "sizes"):
             record[key] = [record[key][position[view]] for view in range(count)]
-        rotations = [np.asarray(pose)[:3, :3] for pose in record["world_to_cam"]]
-        record["angles_deg"] = {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
-                                for i in range(count) for j in range(i + 1, count)}
+        record["angles_deg"] = pair_angles_deg([np.asarray(pose)[:3, :3] for pose in record["world_to_cam"]])
         record["order"] = _order_key(order)
         records[record["order"]] = record
     return records
@@ -48,6 +45,7 @@ def order_spread(by_order: dict[str, dict]) -> dict:
     any camera pair (orders with every view registered), ``focal`` the fitted focal's range over its median, and
     ``registered_orders`` how many orders registered every view."""
     from ..eval.poses import rotation_angle_deg
+    from .real import focal_spread
 
     whole = [r for r in by_order.values() if r["registered"] == len(r["world_to_cam"])]
     nan = float("nan")
@@ -60,9 +58,7 @@ def order_spread(by_order: dict[str, dict]) -> dict:
         relative = [R[j] @ R[i].T for R in rotations]
         for first, second in itertools.combinations(relative, 2):
             turn = max(turn, float(rotation_angle_deg(first, second)))
-    focals = np.array([r["focal"] for r in whole])
-    return {"turn_deg": turn, "focal": float((focals.max() - focals.min()) / np.median(focals)),
-            "registered_orders": len(whole)}
+    return {"turn_deg": turn, "focal": focal_spread([r["focal"] for r in whole]), "registered_orders": len(whole)}
 
 
 def orders_table(by_capture: dict[str, dict[str, dict]]) -> str:

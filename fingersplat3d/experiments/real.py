@@ -21,7 +21,7 @@ import numpy as np
 
 from .process import peak_rss_mb
 
-__all__ = ["measure_real", "summarize_real", "real_table", "sensitivity_against_deviation"]
+__all__ = ["measure_real", "summarize_real", "pair_angles_deg", "focal_spread", "real_table", "sensitivity_against_deviation"]
 
 _TURN_WARNING = "the turn between"  # how every warning about a turn's certainty begins or names it (pipeline.py)
 
@@ -108,11 +108,25 @@ def two_view_turn_errors(three, twos: dict) -> dict:
     return errors
 
 
+def pair_angles_deg(rotations) -> dict[str, float]:
+    """Per view pair ``"ij"`` (i < j): the angle (degrees) of the relative rotation between the views' world-to-camera
+    rotations ``[3, 3]``."""
+    from ..eval.poses import rotation_angle_deg
+
+    return {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
+            for i in range(len(rotations)) for j in range(i + 1, len(rotations))}
+
+
+def focal_spread(focals) -> float:
+    """The fitted focals' range over their median."""
+    focals = np.asarray(focals, np.float64)
+    return float((focals.max() - focals.min()) / np.median(focals))
+
+
 def measure_real(capture, config=None, leave_one_out: bool = False, two_views: bool = False) -> dict:
     """One real capture fused (geometry only unless ``config`` says otherwise): a record for :func:`summarize_real`.
     ``two_views``: also every pair of views fused alone, against the same turn with all three
     (:func:`two_view_turn_errors`)."""
-    from ..eval.poses import rotation_angle_deg
     from ..alignment_status import NO_TIP_WARNING
     from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
@@ -134,8 +148,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "warned_turns": any(_TURN_WARNING in str(w) or NO_TIP_WARNING in str(w) for w in report.get("warnings", [])),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
-              "angles_deg": {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
-                             for i in range(len(rotations)) for j in range(i + 1, len(rotations))}}
+              "angles_deg": pair_angles_deg(rotations)}
     twos = {}
     if (leave_one_out or two_views) and len(capture) == 3:
         twos["01"] = fuse(Capture(capture.views[:2], capture.metadata), config)
@@ -165,7 +178,7 @@ def summarize_real(records: list[dict]) -> dict:
     return {"captures": len(records), "registered_all": len(registered), "rig": rig, "by_finger": by_finger,
             "rig_deviation_median_deg": float(np.median(deviations)) if deviations else nan,
             "rig_deviation_max_deg": float(np.max(deviations)) if deviations else nan,
-            "focal_spread": float((focals.max() - focals.min()) / np.median(focals)) if len(focals) > 1 else nan,
+            "focal_spread": focal_spread(focals) if len(focals) > 1 else nan,
             "fuse_s_median": float(np.median([r["seconds"] for r in records])) if records else nan,
             "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan),
             "two_views": _two_view_summary(records)}
