@@ -37,6 +37,11 @@ def test_every_view_is_left_out_and_scored(small_capture, tmp_path, capsys):
             mse = lambda db: 10.0 ** (-float(db) / 10.0)  # noqa: E731
             parts = (1.0 - share) * mse(row["psnr_seen"]) + share * mse(row["psnr_unseen"])
             assert parts == pytest.approx(mse(row["psnr"]), rel=1e-3)
+        # the seen skin beside the completion: scored where there is enough of it, its tone a difference of grey levels
+        assert (row["psnr_beside_unseen"] == "") == (row["tone_beside_unseen"] == "")
+        if row["psnr_beside_unseen"] != "":
+            assert row["psnr_unseen"] != "" and 5.0 < float(row["psnr_beside_unseen"]) < 60.0
+            assert -1.0 <= float(row["tone_beside_unseen"]) <= 1.0
     assert len(list((out / "views").glob("*.png"))) == 3
     summary = (out / "summary.md").read_text()
     assert "38.13" in summary and "| uwa_small | center |" in summary and "skin the fitted views saw" in summary

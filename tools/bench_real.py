@@ -1,7 +1,7 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
-                                [--two-views] [--focal-px F] [--crop-tip [SHARE]] [--orders]
+                                [--two-views] [--focal-px F] [--crop-tip [SHARE]] [--orders] [--mask-offset PX]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
@@ -10,6 +10,8 @@ photos cropped about their centres, the fingertip outside the frame
 (:func:`fingersplat3d.experiments.real_crops.crop_without_tip`, in memory), and the crops' turns are measured against
 the whole captures' rig mean. With ``--orders``, instead, each capture is fused once per order of its photos (six,
 :mod:`fingersplat3d.experiments.orders`): the rig table of each order and how far each capture moves with the order.
+With ``--mask-offset PX``, each view's finger mask is found on the photo, grown by PX pixels (shrunk where negative)
+and given to the fuse (:mod:`fingersplat3d.experiments.mask_offset`): how far the focal follows the outline.
 """
 from __future__ import annotations
 
@@ -23,13 +25,19 @@ from fingersplat3d.errors import run_script
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
 
 
-def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px: float | None) -> dict:
+def _measure(job, guided_rounds: int, ridge_px: float, two_views: bool, focal_px: float | None,
+             mask_offset: int | None = None) -> dict:
     from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.experiments.real import measure_real
     from fingersplat3d.io.jobs import load_job
     from fingersplat3d.pipeline import FuseConfig
+    from fingersplat3d.scene import Capture
 
     capture = load_job(job)
+    if mask_offset is not None:
+        from fingersplat3d.experiments.mask_offset import with_offset_masks
+
+        capture = Capture(with_offset_masks(capture.views, mask_offset), capture.metadata)
     config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
                         focal_px=focal_px)
     return measure_real(capture, config, leave_one_out=True, two_views=two_views) | {"capture": job.name}
@@ -84,6 +92,9 @@ def main() -> int:
     parser.add_argument("--crop-tip", type=float, nargs="?", const=0.3, metavar="SHARE",
                         help="also fuse every capture cropped about its centre with the fingertip and SHARE (default 0.3) "
                              "of the finger's width behind it outside the frame, against the whole captures' rig")
+    parser.add_argument("--mask-offset", type=int, metavar="PX",
+                        help="each view's finger mask found on the photo and grown by PX pixels (shrunk where negative; "
+                             "0: as found), given to the fuse: how far the focal and the turns follow the outline")
     parser.add_argument("--orders", action="store_true",
                         help="instead: fuse every capture with its photos in each of their orders and report how far the "
                              "result moves with the order")
@@ -100,7 +111,8 @@ def main() -> int:
         return _orders(args)
     records = []
     for job in list_jobs([args.data], args.select):
-        records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px, args.two_views, args.focal_px))
+        records.append(in_fresh_process(_measure, job, args.guided_rounds, args.ridge_px, args.two_views, args.focal_px,
+                                         args.mask_offset))
         r = records[-1]
         print(f"{job.name}: {r['registered']}/3 registered, angles {', '.join(f'{v:.1f}' for v in r['angles_deg'].values())}, "
               f"focal {r['focal']:.0f}, {r['seconds']:.1f} s", file=sys.stderr, flush=True)

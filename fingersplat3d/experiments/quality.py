@@ -13,7 +13,10 @@ For each capture (synthetic or real, 2+ views):
    the registered views share (:mod:`fingersplat3d.splat.shading_estimate`; column ``exposure``), as its camera is;
 3. PSNR and SSIM inside ``k``'s finger mask (:mod:`fingersplat3d.eval.image`), the PSNR again on the skin the
    fitted views saw and on the unseen skin's completion apart (``psnr_seen``, ``psnr_unseen``; ``unseen_share``: the
-   share of the finger rendered mostly from the completion, which is a guess of skin no fitted photo shows), and NFIQ2 of the
+   share of the finger rendered mostly from the completion, which is a guess of skin no fitted photo shows), the
+   seen skin within one ridge period of the completion apart again (``psnr_beside_unseen``, and ``tone_beside_unseen``:
+   the render's mean there less the photo's, in grey levels of 1: skin the fitted views see only at a slant, where a
+   new view looking at it squarely shows how well its tone was carried over), and NFIQ2 of the
    real photo and of the aligned render, both as contact-like prints
    (:mod:`fingersplat3d.eval.contact`; the render's print covers where the model is opaque and is
    scaled by the photo's ridge period: a blurred render must not read as a coarser finger).
@@ -39,7 +42,7 @@ __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
 PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
 """The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
 COLUMNS = ("capture", "view", "status", "reason", "train_views", "exposure", "psnr_placed", "ssim_placed", "psnr",
-           "ssim", "unseen_share", "psnr_seen", "psnr_unseen", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+           "ssim", "unseen_share", "psnr_seen", "psnr_unseen", "psnr_beside_unseen", "tone_beside_unseen", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
 MIN_PART_PIXELS = 500
 """A part of the finger (the skin the fitted views saw, or the unseen skin's completion) smaller than this many pixels
 in the left-out view gets no PSNR of its own (an empty cell): too few pixels to say anything."""
@@ -116,8 +119,12 @@ def evaluate_capture(name: str, capture, config, out: Path, *, nfiq2: bool = Tru
 def _by_part(model, completion, camera, render: np.ndarray, view) -> dict:
     """The left-out view's finger split by where its render comes from: ``unseen_share``, the share of its mask
     pixels rendered mostly (half their opacity or more) by the ``completion`` rows of the model (``[N]`` bool,
-    :attr:`~fingersplat3d.splat.stage.SplatStage.unseen`: a guess, no photo saw that skin), and the PSNR of the render
-    on each part (empty where a part has under :data:`MIN_PART_PIXELS` pixels)."""
+    :attr:`~fingersplat3d.splat.stage.SplatStage.unseen`: a guess, no photo saw that skin), the PSNR of the render
+    on each part, and on the seen skin within one ridge period of the completion with the tone of the render there
+    against the photo's (empty where a part, or the completion beside it, has under :data:`MIN_PART_PIXELS` pixels)."""
+    from scipy import ndimage
+
+    from ..align.correspond.texture import as_gray, estimate_ridge_period
     from ..eval.image import masked_psnr
     from ..splat.novel import opacity_share
 
@@ -126,9 +133,15 @@ def _by_part(model, completion, camera, render: np.ndarray, view) -> dict:
     if bool(completion.any()):
         unseen = (opacity_share(model, completion, camera) >= 0.5) & mask
     seen = mask & ~unseen
+    beside = np.zeros_like(mask)
+    if unseen.sum() >= MIN_PART_PIXELS:  # beside a completion large enough to score
+        beside = seen & (ndimage.distance_transform_edt(~unseen) <= estimate_ridge_period(as_gray(view.image), mask))
     psnr = lambda part: masked_psnr(render, view.image, part) if part.sum() >= MIN_PART_PIXELS else ""  # noqa: E731
+    tone = ""
+    if beside.sum() >= MIN_PART_PIXELS:
+        tone = round(float(as_gray(render)[beside].mean() - as_gray(view.image)[beside].mean()), 4)
     return {"unseen_share": round(float(unseen.sum()) / max(int(mask.sum()), 1), 4), "psnr_seen": psnr(seen),
-            "psnr_unseen": psnr(unseen)}
+            "psnr_unseen": psnr(unseen), "psnr_beside_unseen": psnr(beside), "tone_beside_unseen": tone}
 
 
 def _exposures(result, aligned: list[int]):
@@ -186,6 +199,8 @@ def summary_markdown(rows: list[dict]) -> str:
         for key, label in (("psnr", "PSNR dB (aligned)"), ("ssim", "SSIM (aligned)"),
                            ("psnr_seen", "PSNR dB on the skin the fitted views saw"),
                            ("psnr_unseen", "PSNR dB on the unseen skin's completion (a guess)"),
+                           ("psnr_beside_unseen", "PSNR dB on the seen skin within a ridge period of the completion"),
+                           ("tone_beside_unseen", "render less photo there, mean grey level (of 1)"),
                            ("unseen_share", "share of the finger rendered from the completion"), ("nfiq2_real", "NFIQ2 real"),
                            ("nfiq2_render", "NFIQ2 render")):
             value, count = _mean(done, key)
