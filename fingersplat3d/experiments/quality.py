@@ -42,7 +42,8 @@ __all__ = ["PAPER_NFIQ2", "evaluate_capture", "run_quality_evaluation"]
 PAPER_NFIQ2 = {"real": 38.13, "FingerSplat": 35.68}
 """The paper's mean NFIQ2 on UWA: real views and FingerSplat's synthesized views."""
 COLUMNS = ("capture", "view", "status", "reason", "train_views", "exposure", "psnr_placed", "ssim_placed", "psnr",
-           "ssim", "unseen_share", "psnr_seen", "psnr_unseen", "psnr_beside_unseen", "tone_beside_unseen", "nfiq2_real", "nfiq2_render", "nfiq2_failure", "fit_s")
+           "ssim", "unseen_share", "psnr_seen", "psnr_unseen", "psnr_beside_unseen", "tone_beside_unseen", "nfiq2_real",
+           "nfiq2_render", "nfiq2_failure", "fit_s")
 MIN_PART_PIXELS = 500
 """A part of the finger (the skin the fitted views saw, or the unseen skin's completion) smaller than this many pixels
 in the left-out view gets no PSNR of its own (an empty cell): too few pixels to say anything."""
