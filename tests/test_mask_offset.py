@@ -40,3 +40,13 @@ def test_zero_keeps_a_given_mask_and_finds_a_missing_one():
     bare = View(photo.name, photo.image)
     found, = with_offset_masks([bare], 0)
     assert np.array_equal(found.mask, finger_mask(photo.image, name=photo.name))
+
+
+def test_bench_real_refuses_it_beside_runs_that_find_their_own_masks():
+    import subprocess
+    import sys
+
+    tool = Path(__file__).resolve().parents[1] / "tools" / "bench_real.py"
+    for other in (["--orders"], ["--crop-tip"]):
+        done = subprocess.run([sys.executable, str(tool), "--mask-offset", "2", *other], capture_output=True, text=True)
+        assert done.returncode == 2 and "--mask-offset" in done.stderr and "Traceback" not in done.stderr

@@ -103,6 +103,10 @@ def main() -> int:
         print(f"bench_real: --crop-tip {args.crop_tip:g}: the share of the finger's width cut behind the tip must lie "
               "in 0-2", file=sys.stderr)
         return 2
+    if args.mask_offset is not None and (args.orders or args.crop_tip is not None):
+        print("bench_real: --mask-offset grows the masks of the whole captures' run only; --orders and --crop-tip find "
+              "their own: run it alone", file=sys.stderr)
+        return 2
     if not args.data.is_dir():
         print(f"bench_real: {args.data}: no such folder (the real dev captures live in ../shared/data/uwa-real-dev)",
               file=sys.stderr)
