@@ -150,3 +150,45 @@ def test_a_capture_with_no_view_registered_keeps_its_reason_and_files(tmp_path, 
     assert row["focal_px"] is not None and math.isfinite(row["focal_px"])
     written = json.loads((tmp_path / "out" / "lone" / "batch.json").read_text())
     assert written["residual_px"] is None and (tmp_path / "out" / "lone" / "report.json").is_file()
+
+
+def test_the_batch_arc_of_a_capture_with_a_camera_stored_portrait(tmp_path):
+    """UWA stores a camera turned by a quarter turn now and then (1_1_4_1_0.jpg): the batch's arc renders it at its
+    landscape twins' scale and all the arc's views share one size (each camera scaled to one width made the portrait
+    one taller, and the whole capture was lost to the arc's size check)."""
+    from types import SimpleNamespace
+
+    from fingersplat3d.batch.task import THUMB_WIDTH, _render_arc
+    from fingersplat3d.io import read_cameras
+    from fingersplat3d.splat.camera_path import _quarter_turn
+    from fingersplat3d.synth.rigs import ring_rig
+    from fingersplat3d.synth.shape import FingerParams
+    from test_render_cli import _finger_gaussians
+
+    cameras = [view.camera for view in ring_rig(FingerParams(), (-45.0, 0.0, 45.0), size=(640, 512))]
+    cameras[0] = _quarter_turn(cameras[0], 1)
+    assert cameras[0].size == (512, 640)
+    result = SimpleNamespace(cameras=cameras, gaussians=_finger_gaussians(), units="mm", scale_mm_per_unit=1.0)
+    _render_arc(tmp_path, result, 5)
+    placed = read_cameras(tmp_path / "renders" / "cameras.json")
+    assert len(placed.names) == 5
+    assert {camera.size for camera in placed.cameras.values()} == {(2 * THUMB_WIDTH, 2 * THUMB_WIDTH * 512 // 640)}
+
+
+def test_a_capture_that_fails_after_its_fuse_is_recorded_as_failed(tmp_path, small_capture, monkeypatch):
+    """An error after the fuse (writing, rendering) leaves the row 'failed', not the 'done' the fuse had set."""
+    import fingersplat3d.pipeline as pipeline
+    from fingersplat3d.batch.task import BatchOptions, process_capture
+    from fingersplat3d.io.jobs import list_jobs
+    from fingersplat3d.pipeline import FuseConfig
+
+    def full_disk(result, folder):
+        raise OSError("No space left on device (test)")
+
+    monkeypatch.setattr(pipeline, "write_reconstruction_files", full_disk)
+    write_capture(small_capture, tmp_path / "dataset" / "lone")
+    row = process_capture(list_jobs([tmp_path / "dataset"])[0], str(tmp_path / "out"),
+                          BatchOptions(FuseConfig(splat=None), render=0))
+    assert row["status"] == "failed" and "No space left" in row["reason"]
+    written = json.loads((tmp_path / "out" / ".failed" / "lone.json").read_text())
+    assert written["status"] == "failed" and not (tmp_path / "out" / "lone").exists()

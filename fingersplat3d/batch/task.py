@@ -72,7 +72,10 @@ def _render_arc(folder: Path, result, count: int) -> None:
     from ..io.renders import write_renders
     from ..splat.novel import arc_views
 
-    cameras = [camera.scaled(THUMB_WIDTH * 2 / camera.width) for camera in result.cameras]
+    # One factor for every camera, from the longest side: a camera stored portrait among landscape ones (UWA's
+    # 1_1_4_1_0.jpg) keeps its twins' scale, so the arc can turn it back (the arc needs one image size).
+    factor = THUMB_WIDTH * 2 / max(max(camera.size) for camera in result.cameras)
+    cameras = [camera.scaled(factor) for camera in result.cameras]
     write_renders(folder / "renders", arc_views(result.gaussians, cameras, count), result.units, result.scale_mm_per_unit)
 
 
@@ -120,7 +123,7 @@ def process_capture(job: CaptureJob, out: str, options: BatchOptions) -> dict:
         failure_path(out, job.name).unlink(missing_ok=True)
         return row
     except (InputError, FileExistsError, ValueError, RuntimeError, OSError, MemoryError) as error:
-        row.update(reason=" ".join(str(error).split()) or type(error).__name__,
+        row.update(status="failed", reason=" ".join(str(error).split()) or type(error).__name__,
                    seconds=round(time.perf_counter() - started, 3), peak_rss_mb=round(_peak_rss_mb(), 1))
         if not isinstance(error, InputError):
             row["trace"] = traceback.format_exc(limit=4)
