@@ -99,6 +99,22 @@ def test_minority_vote_is_removed():
     assert cleaned.means[:, 0].tolist() == [-1.0]
 
 
+def test_a_margin_of_the_ridge_period_keeps_skin_just_off_an_outline_and_not_floaters():
+    """Given the views' ridge periods, a view votes foreground within ``margin_periods`` of them of its mask: a
+    Gaussian 2 px off the outline (the skin next to a silhouette, placed a little off it) stays, one 12 px off (a
+    floater over the background) goes, as without a margin; without periods the vote is SAGD's, at the mask alone."""
+    cameras = rig()
+    masks = half_masks(cameras)  # 4 px per unit at the target: x = 0.5 is 2 px off every mask, x = 3 is 12 px
+    gaussians = make_gaussians([[-1.0, 0.0, 0.0], [0.5, 0.0, 0.0], [3.0, 0.0, 0.0]], 0.05)
+    kept, stats = clean_with_masks(gaussians, cameras, masks, CleanConfig(rounds=0), periods=[16.0] * 3)
+    assert kept.means[:, 0].tolist() == [-1.0, 0.5] and stats.removed_background == 1
+    assert clean_with_masks(gaussians, cameras, masks, CleanConfig(rounds=0))[0].means[:, 0].tolist() == [-1.0]
+    tight = CleanConfig(rounds=0, margin_periods=0.1)  # 1.6 px: the one 2 px off goes too
+    assert clean_with_masks(gaussians, cameras, masks, tight, periods=[16.0] * 3)[0].means[:, 0].tolist() == [-1.0]
+    with pytest.raises(ValueError, match="margins"):
+        clean_with_masks(gaussians, cameras, masks, periods=[16.0] * 2)
+
+
 def test_straddling_gaussian_is_split_and_the_outside_child_removed():
     cameras = rig()
     masks = half_masks(cameras)
@@ -188,6 +204,9 @@ def test_render_leaks_less_alpha_after_cleaning():
     print(f"alpha outside the mask: before {before:.3f}, after {after:.3f}; {stats}")
     assert before > 0.25
     assert after < 0.05 and after < before / 5
+    # With the fuse's margin (a quarter of a 4 px ridge period: 1 px), what is left outside is within it.
+    margined, _ = clean_with_masks(gaussians, cameras, masks, CleanConfig(rounds=3), periods=[4.0] * 3)
+    assert after <= leak(margined) < 0.08
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")

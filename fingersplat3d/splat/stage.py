@@ -85,7 +85,7 @@ def run_splat_stage(views: Sequence[View], cameras: Sequence[Camera], fitted_vie
     model = fit.gaussians
     outside_before = _alpha_outside(model, fit.cameras, masks, config)
     started = time.perf_counter()
-    cleaned, clean_stats = clean_with_masks(model, fit.cameras, masks, clean_config)
+    cleaned, clean_stats = clean_with_masks(model, fit.cameras, masks, clean_config, periods=train_periods)
     clean_seconds = time.perf_counter() - started
     completed = 0
     if unseen is not None and len(cleaned):

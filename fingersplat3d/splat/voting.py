@@ -7,8 +7,15 @@ boundary Gaussians. Here:
 
 1. **Vote.** Each Gaussian centre is projected into every view. It is *seen* by a view when it is
    in front of the camera (depth > ``near``, default 0) and inside the image; the view votes
-   foreground when its mask is set at the centre's pixel. Occlusion is ignored on purpose: a point on the finger
-   lies inside every view's silhouette whether or not it is hidden (the visual-hull rule).
+   foreground when its mask is set at the centre's pixel, or within that view's ``margins_px`` of it (SAGD's rule
+   is no margin). Occlusion is ignored on purpose: a point on the finger lies inside every view's silhouette whether
+   or not it is hidden (the visual-hull rule). The margin is for the skin next to one view's silhouette: a view 90
+   degrees away sees it squarely and this one edge-on, so its Gaussians' centres fall a pixel or few either side of
+   this view's outline with any error of the surface or the mask; a vote at the centre alone took half of them out,
+   and with two views (both must agree) that left holes along each view's outline in the skin between them, seen
+   in every new view (measured, docs/measurements.md: every Gaussian voted out of a real two-view fit lay within
+   5 px of a mask; none was a floater over the background). The fuse gives a margin of a fraction of each view's
+   ridge period (:attr:`CleanConfig.margin_periods`).
 2. **Remove background.** A seen Gaussian is kept when its foreground fraction
    ``foreground / seen`` is at least ``min_foreground_fraction``. A Gaussian no view sees is kept:
    there is no evidence against it (it cannot show up in the input views either).
@@ -29,6 +36,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
+import cv2
 import numpy as np
 import torch
 
@@ -66,6 +74,9 @@ class CleanConfig:
     foreground. 0.6 is a strict majority for 2 to 5 views (2 views: both; 3 views: 2)."""
     sample_sigma: float = 1.5
     """Boundary test: footprint samples at ``mean +- sample_sigma * sigma`` along each axis."""
+    margin_periods: float = 0.25
+    """A view votes foreground within this many of its ridge periods of its mask (the margin the module docstring's
+    step 1 describes), when :func:`clean_with_masks` is given the views' ridge periods; 0: at the mask alone."""
     rounds: int = 2
     """Decomposition rounds (each splits the Gaussians still straddling an edge, then re-votes)."""
     child_scale: float = 0.5
@@ -139,13 +150,16 @@ def split_gaussians(gaussians: Gaussians, axes: torch.Tensor, child_scale: float
 
 
 def clean_with_masks(gaussians: Gaussians, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
-                     config: CleanConfig = CleanConfig()) -> tuple[Gaussians, CleanStats]:
-    """Vote, remove background, decompose boundary Gaussians for ``config.rounds`` rounds.
+                     config: CleanConfig = CleanConfig(), periods: Sequence[float] | None = None
+                     ) -> tuple[Gaussians, CleanStats]:
+    """Vote, remove background, decompose boundary Gaussians for ``config.rounds`` rounds. ``periods``: each view's
+    ridge period in pixels, for the votes' margin (``config.margin_periods`` of it; None: no margin).
 
     The result is detached, on the input's device. See the module docstring for the rules.
     """
     device, dtype = gaussians.means.device, gaussians.means.dtype
-    views = _ViewStack.build(cameras, masks, device, dtype)
+    margins = None if periods is None else [config.margin_periods * float(period) for period in periods]
+    views = _ViewStack.build(cameras, masks, device, dtype, margins)
     gaussians = gaussians.detach()
     input_count = len(gaussians)
     labels = views.labels(gaussians.means, config.near)
@@ -173,6 +187,15 @@ def clean_with_masks(gaussians: Gaussians, cameras: Sequence[Camera], masks: Seq
 
 # --- helpers -----------------------------------------------------------------------------------
 
+def _grown(mask: np.ndarray, margin_px: float) -> np.ndarray:
+    """``mask`` with every pixel within ``margin_px`` (Euclidean, between pixel centres) of it set."""
+    mask = mask.astype(bool)
+    if not margin_px > 0 or mask.all() or not mask.any():
+        return mask
+    distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return distance <= margin_px
+
+
 @dataclass(frozen=True)
 class _ViewStack:
     """Cameras and masks as tensors on one device (validated once)."""
@@ -184,8 +207,14 @@ class _ViewStack:
 
     @staticmethod
     def build(cameras: Sequence[Camera], masks: Sequence[np.ndarray], device: torch.device,
-              dtype: torch.dtype) -> "_ViewStack":
+              dtype: torch.dtype, margins_px: Sequence[float] | None = None) -> "_ViewStack":
+        """``margins_px``: per view, the pixels off its mask that still vote foreground (the mask grown by an exact
+        Euclidean distance; None or 0: the mask as it is)."""
         cameras, masks = list(cameras), [np.asarray(mask) for mask in masks]
+        if margins_px is not None:
+            if len(margins_px) != len(masks):
+                raise ValueError(f"got {len(masks)} masks but {len(margins_px)} margins")
+            masks = [_grown(mask, margin) for mask, margin in zip(masks, margins_px)]
         if not cameras:
             raise ValueError("mask voting needs at least one camera")
         if len(cameras) != len(masks):
