@@ -188,3 +188,8 @@ def test_webp_photos_are_read_upright_and_heic_is_named_with_what_to_do(tmp_path
     (only_heic / "IMG_0001.HEIC").write_bytes(b"\x00\x00\x00\x18ftypheic")
     with pytest.raises(InputError, match="holds no images .*its HEIC photos are not read: save them as JPEG"):
         load_any(only_heic)
+    only_gif = tmp_path / "web"  # a palette of 256 colours: named too, not "holds no images" alone
+    only_gif.mkdir()
+    Image.fromarray(stored).save(only_gif / "finger.gif")
+    with pytest.raises(InputError, match="holds no images .*its GIF photos are not read: save them as JPEG"):
+        load_any(only_gif)

@@ -17,7 +17,7 @@ __all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
-                   ".arw": "raw"}
+                   ".arw": "raw", ".gif": "GIF"}
 """Photo formats a phone or camera may write that OpenCV does not read here: named in the error, with what to do."""
 
 
