@@ -204,8 +204,9 @@ def test_render_leaks_less_alpha_after_cleaning():
     print(f"alpha outside the mask: before {before:.3f}, after {after:.3f}; {stats}")
     assert before > 0.25
     assert after < 0.05 and after < before / 5
-    # With the fuse's margin (a quarter of a 4 px ridge period: 1 px), what is left outside is within it.
-    margined, _ = clean_with_masks(gaussians, cameras, masks, CleanConfig(rounds=3), periods=[4.0] * 3)
+    # With a margin (a quarter of a 4 px ridge period: 1 px), what is left outside is within it.
+    margined, _ = clean_with_masks(gaussians, cameras, masks, CleanConfig(rounds=3, margin_periods=0.25),
+                                   periods=[4.0] * 3)
     assert after <= leak(margined) < 0.08
 
 
