@@ -177,6 +177,8 @@ def test_bad_input():
         vote_labels(gaussians.means, cameras, [masks[0], masks[1][:-1], masks[2]])
     with pytest.raises(ValueError):
         CleanConfig(child_scale=1.0)
+    with pytest.raises(ValueError, match="margin_periods"):
+        CleanConfig(margin_periods=float("nan"))
     empty = gaussians.subset(torch.zeros(1, dtype=torch.bool))
     cleaned, stats = clean_with_masks(empty, cameras, masks)
     assert len(cleaned) == 0 and stats.output_count == 0

@@ -93,6 +93,8 @@ class CleanConfig:
             raise ValueError(f"min_foreground_fraction must be in [0, 1], got {self.min_foreground_fraction}")
         if not self.sample_sigma > 0.0:
             raise ValueError(f"sample_sigma must be positive, got {self.sample_sigma}")
+        if not self.margin_periods >= 0.0:
+            raise ValueError(f"margin_periods must be >= 0, got {self.margin_periods}")
         if self.rounds < 0:
             raise ValueError(f"rounds must be >= 0, got {self.rounds}")
         if not 0.0 < self.child_scale < 1.0:
