@@ -36,12 +36,12 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
-import cv2
 import numpy as np
 import torch
 
 from ..errors import InputError
 from ..scene import Camera
+from ..segment.morphology import dilated
 from .gaussians import Gaussians
 from ..rotations import quaternion_to_matrix
 
@@ -191,15 +191,6 @@ def clean_with_masks(gaussians: Gaussians, cameras: Sequence[Camera], masks: Seq
 
 # --- helpers -----------------------------------------------------------------------------------
 
-def _grown(mask: np.ndarray, margin_px: float) -> np.ndarray:
-    """``mask`` with every pixel within ``margin_px`` (Euclidean, between pixel centres) of it set."""
-    mask = mask.astype(bool)
-    if not margin_px > 0 or mask.all() or not mask.any():
-        return mask
-    distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return distance <= margin_px
-
-
 @dataclass(frozen=True)
 class _ViewStack:
     """Cameras and masks as tensors on one device (validated once)."""
@@ -212,13 +203,13 @@ class _ViewStack:
     @staticmethod
     def build(cameras: Sequence[Camera], masks: Sequence[np.ndarray], device: torch.device,
               dtype: torch.dtype, margins_px: Sequence[float] | None = None) -> "_ViewStack":
-        """``margins_px``: per view, the pixels off its mask that still vote foreground (the mask grown by an exact
-        Euclidean distance; None or 0: the mask as it is)."""
+        """``margins_px``: per view, the pixels off its mask that still vote foreground (the mask grown by the
+        project's disc of that radius, whole pixels; None or under 1: the mask as it is)."""
         cameras, masks = list(cameras), [np.asarray(mask) for mask in masks]
         if margins_px is not None:
             if len(margins_px) != len(masks):
                 raise ValueError(f"got {len(masks)} masks but {len(margins_px)} margins")
-            masks = [_grown(mask, margin) for mask, margin in zip(masks, margins_px)]
+            masks = [dilated(mask, int(margin)) if margin >= 1 else mask for mask, margin in zip(masks, margins_px)]
         if not cameras:
             raise ValueError("mask voting needs at least one camera")
         if len(cameras) != len(masks):
