@@ -133,7 +133,7 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
     """Each aligned pair's least turn allowed by the silhouettes (:mod:`~fingersplat3d.align.width_check`); a warning
     where the solved turn falls short of it."""
     from .align.width_check import least_turns_deg
-    from .eval.poses import rotation_angle_deg
+    from .eval.poses import view_turn_deg
 
     names, placed = capture.names, [v for v in range(len(capture)) if alignment.aligned[v]]
     if len(placed) < 2:
@@ -146,7 +146,7 @@ def _check_turns_against_widths(capture: Capture, alignment: GlobalAlignment, st
                 continue
             pair = f"{names[a]}-{names[b]}"
             least[pair] = round(float(bounds[a, b]), 1)
-            turn = float(rotation_angle_deg(alignment.cam_to_world[a][:3, :3], alignment.cam_to_world[b][:3, :3]))
+            turn = view_turn_deg(alignment.cam_to_world[a][:3, :3].T, alignment.cam_to_world[b][:3, :3].T)[0]
             if bounds[a, b] - turn > MAX_TURN_SHORTFALL_DEG:
                 short.append(f"{pair} ({turn:.0f}°, at least {bounds[a, b]:.0f}°)")
             elif len(placed) < PIVOT_MIN_VIEWS and turn - bounds[a, b] < AT_BOUND_DEG:  # the hinges' own condition

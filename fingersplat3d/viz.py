@@ -148,13 +148,28 @@ def _rig_tile(cameras: list, names: list[str], aligned: list[bool], size: int = 
     return tile
 
 
+def _wrapped(line: str, width: int, scale: float) -> list[str]:
+    """``line`` broken after its commas into lines no wider than ``width`` pixels (a part wider alone stays whole);
+    the parts after the first indented."""
+    parts, lines = line.split(", "), []
+    current = parts[0]
+    for part in parts[1:]:
+        candidate = f"{current}, {part}"
+        if cv2.getTextSize(candidate, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] <= width:
+            current = candidate
+        else:
+            lines.append(current + ",")
+            current = "   " + part
+    return lines + [current]
+
+
 def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, backing: list[np.ndarray | None],
                   alignment: dict) -> np.ndarray:
     """``fs3d fuse``'s picture of what it found (RGB uint8): each photo, the skin a second view backs green and the
     skin only it sees amber (there the shape is the pointmap's guess), a view not placed framed red; the placed
     cameras seen along the finger; each turn between views and how far it moves with the focal 10 % off, and a
     warning where the photos do not hold the focal (``alignment``: report.json's)."""
-    from .eval.poses import rotation_angle_deg
+    from .eval.poses import ROLL_NOTED_DEG, view_turn_deg
 
     aligned = [backing_map is not None for backing_map in backing]
     shares = alignment.get("backed_by_two_views") or {}
@@ -174,11 +189,13 @@ def fuse_overview(images: list[np.ndarray], names: list[str], cameras: list, bac
             for b in range(a + 1, len(names)):
                 if aligned[a] and aligned[b]:
                     pair = f"{names[a]}-{names[b]}"
-                    angle = rotation_angle_deg(cameras[a].rotation, cameras[b].rotation)
-                    lines.append(f"{pair}: {angle:.1f} deg" + (f", moves {moves[pair]:.1f} {how}"
-                                                                if moves.get(pair) is not None else ""))
-        text = np.full((20 * min(len(lines), 6) + 8, rig.shape[1], 3), 255, np.uint8)
-        for row, line in enumerate(lines[:6]):
+                    angle, roll = view_turn_deg(cameras[a].rotation, cameras[b].rotation)
+                    rolled = f" (photo turned {roll:.0f})" if abs(roll) >= ROLL_NOTED_DEG else ""
+                    lines.append(f"{pair}: {angle:.1f} deg" + rolled + (f", moves {moves[pair]:.1f} {how}"
+                                                                         if moves.get(pair) is not None else ""))
+        lines = [part for line in lines for part in _wrapped(line, rig.shape[1] - 12, 0.42)]
+        text = np.full((20 * min(len(lines), 8) + 8, rig.shape[1], 3), 255, np.uint8)
+        for row, line in enumerate(lines[:8]):
             colour = _NOT_PLACED if line.startswith("the photos") else (30, 30, 30)
             cv2.putText(text, line, (6, 16 + 20 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.42, colour, 1, cv2.LINE_AA)
         tiles.append(_caption(np.vstack([rig, text]), ["the cameras seen along the finger", "turns between them"]))

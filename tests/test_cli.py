@@ -149,9 +149,9 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     rec = tmp_path / "rec"
     rec.mkdir()
     poses = []
-    for degrees in (0.0, 30.0, 75.0):
+    for degrees, roll in ((0.0, 0.0), (30.0, 90.0), (75.0, 0.0)):  # b's photo stored portrait: its camera rolled 90°
         pose = np.eye(4)
-        pose[:3, :3] = Rotation.from_euler("y", degrees, degrees=True).as_matrix()
+        pose[:3, :3] = (Rotation.from_euler("z", roll, degrees=True) * Rotation.from_euler("y", degrees, degrees=True)).as_matrix()
         poses.append(pose)
     write_cameras(rec / "cameras.json", [(name, f"{name}.png", Camera.from_focal(1500.0, 640, 512, pose))
                                          for name, pose in zip(("a", "b", "c"), poses)])
@@ -164,12 +164,14 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     described = json.loads(capsys.readouterr().out)[0]
     assert described["kind"] == "reconstruction folder" and described["registered"] == "2 of 3"
     assert [p["pair"] for p in described["pairs"]] == ["a-b"]  # c is not registered
-    assert described["pairs"][0]["turn_deg"] == pytest.approx(30.0, abs=1e-6)
+    assert described["pairs"][0]["turn_deg"] == pytest.approx(30.0, abs=1e-6)  # the optical axes', not 95.7°
+    assert described["pairs"][0]["roll_deg"] == pytest.approx(90.0, abs=1e-6)
     assert described["warnings"] == ["something to know"] and described["files"] == ["report.json"]
     assert described["shading_exponent"] == 0.37  # how much darker the skin at a slant (gaussians.ply's exponent)
     assert main(["info", str(rec)]) == 0
     out = capsys.readouterr().out
-    assert "c: 640x512, focal 1500 px, not registered" in out and "turn a-b: 30.00°, ±0.05°" in out
+    assert "c: 640x512, focal 1500 px, not registered" in out
+    assert "turn a-b: 30.00° (and rolled 90° about the optical axis, as a photo turned in its plane), ±0.05°" in out
     assert "warning: something to know" in out and "shading_exponent: 0.37" in out
     batch = tmp_path / "batch"  # 'fs3d batch -o' writes one reconstruction folder per capture
     batch.mkdir()

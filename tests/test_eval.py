@@ -4,7 +4,7 @@ import pytest
 
 from fingersplat3d.eval.depth import DepthErrors, align_scale, align_scale_shift, depth_errors
 from fingersplat3d.eval.poses import (relative_rotation_errors, rotation_angle_deg, translation_direction_errors,
-                                      vector_angle_deg, view_pairs)
+                                      vector_angle_deg, view_pairs, view_turn_deg)
 from fingersplat3d.scene import look_at
 from fingersplat3d.synth.rigs import rotation_about
 
@@ -128,6 +128,21 @@ def test_vector_angle():
     assert vector_angle_deg([1, 0, 0], [0, 2, 0]) == pytest.approx(90.0)
     assert vector_angle_deg([1, 0, 0], [-1, 1e-9, 0]) == pytest.approx(180.0, abs=1e-6)
     assert np.isnan(vector_angle_deg([0, 0, 0], [1, 0, 0]))
+
+
+@pytest.mark.parametrize("roll", [0.0, 90.0, -90.0, 25.0, 179.0])
+def test_view_turn_is_the_optical_axes_angle_whatever_the_roll(roll):
+    """A side camera 45° round the finger whose photo is turned in its plane turns 45° about the finger, rolled
+    ``roll``; the rotation's own angle mixes the two."""
+    from scipy.spatial.transform import Rotation
+
+    a = Rotation.from_euler("y", 10.0, degrees=True)
+    b = Rotation.from_euler("z", roll, degrees=True) * Rotation.from_euler("y", 45.0, degrees=True) * a
+    turn, rolled = view_turn_deg(a.as_matrix(), b.as_matrix())
+    assert turn == pytest.approx(45.0, abs=1e-9) and rolled == pytest.approx(roll, abs=1e-9)
+    own = rotation_angle_deg(b.as_matrix() @ a.as_matrix().T, np.eye(3))
+    assert own >= turn - 1e-9 and (roll == 0.0) == (own == pytest.approx(45.0, abs=1e-6))
+    assert view_turn_deg(b.as_matrix(), a.as_matrix())[0] == pytest.approx(45.0, abs=1e-9)  # either way round
 
 
 def _rig(count: int = 4) -> list[np.ndarray]:

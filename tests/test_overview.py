@@ -56,3 +56,16 @@ def test_ten_views_wrap_into_rows():
                             [np.ones((60, 80), np.int8)] * 10, {})
     assert picture.shape[0] > 2 * TILE_HEIGHT + 26  # two rows of photos (five each) and the rig, and the legend
     assert picture.shape[1] < 6 * 480 + 60  # at most five photos wide
+
+
+def test_turn_lines_wrap_after_their_commas_within_the_tile():
+    import cv2
+
+    from fingersplat3d.viz import _wrapped
+
+    line = "f0-f1: 42.6 deg (photo turned -89), moves 0.6 with the focal 10% off"
+    assert _wrapped("f1-f2: 87.8 deg", 300, 0.42) == ["f1-f2: 87.8 deg"]
+    parts = _wrapped(line, 250, 0.42)
+    assert len(parts) == 2 and parts[0].endswith(",") and parts[1].startswith("   moves")
+    assert all(cv2.getTextSize(p, cv2.FONT_HERSHEY_SIMPLEX, 0.42, 1)[0][0] <= 250 for p in parts)
+    assert _wrapped("one-part-wider-than-the-tile", 10, 0.42) == ["one-part-wider-than-the-tile"]

@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from fingersplat3d.pointmaps import Pointmap, PointmapBackend, get_backend
-from fingersplat3d.pointmaps.prior import PriorBackend, finger_height, height_to_points
+from fingersplat3d.pointmaps.prior import (PriorBackend, finger_height, height_to_points, ray_section_relief,
+                                          tangent_sections)
+from fingersplat3d.segment.silhouette import Sections
 from fingersplat3d.errors import InputError
 from fingersplat3d.scene import View
 
@@ -91,6 +93,63 @@ def test_ratio_scales_and_perspective_converges_to_orthographic():
     np.testing.assert_allclose(far, ortho, atol=1e-3)
     near = finger_height(mask, 1.0, 0.15, focal=400.0).height
     assert np.isfinite(near).all() and (near[mask] >= 0).all() and (near[~mask] == 0).all()
+
+
+def elliptic_cylinder(cols, rows, focal, radius, ratio, distance, offset):
+    """Mask and true camera depth of an elliptic cylinder along the image rows, seen in perspective: half-width
+    ``radius`` across, ``ratio * radius`` in depth, its axis ``distance`` from the camera and ``offset`` below the
+    optical axis (the image centre's row)."""
+    v = (np.arange(rows) - (rows - 1) / 2.0)[:, None] * np.ones((1, cols))
+    m = v / focal  # each row's ray slope across the cylinder
+    a, b = radius, ratio * radius
+    quad_a = m * m / (a * a) + 1.0 / (b * b)
+    quad_b = m * offset / (a * a) + distance / (b * b)
+    quad_c = offset * offset / (a * a) + distance * distance / (b * b) - 1.0
+    disc = quad_b * quad_b - quad_a * quad_c
+    mask = disc > 0
+    depth = np.where(mask, (quad_b - np.sqrt(np.maximum(disc, 0.0))) / quad_a, np.nan)
+    return mask, depth
+
+
+@pytest.mark.parametrize("offset", [0.0, 3.0, -10.0])
+def test_perspective_relief_is_exact_for_an_elliptic_cylinder(offset):
+    """The outline's rays graze the finger in front of its widest line: with the sections fitted to those tangent
+    rays, the prior's depth is the true depth up to one scale (a close camera, the finger 0.37 of the frame wide)."""
+    focal, ratio = 500.0, 0.9
+    mask, depth = elliptic_cylinder(160, 520, focal, 8.0, ratio, 45.0, offset)
+    relief = finger_height(mask, ratio, 0.15, focal=focal).height
+    model = focal - relief
+    used = mask & (np.abs(np.arange(160) - 80) < 60)[None, :]  # off the frame's ends, where the chords are whole
+    scale = float(np.sum(model[used] * depth[used]) / np.sum(depth[used] ** 2))
+    error = (model[used] - scale * depth[used]) / scale
+    depth_of_relief = ratio * 8.0
+    assert np.sqrt(np.mean(error ** 2)) < 0.006 * depth_of_relief  # 0.0006-0.004; the chords as widest lines 0.010-0.036
+    assert np.abs(error).max() < 0.05 * depth_of_relief  # 0.004-0.032; the chords as widest lines 0.06-0.21
+
+
+def test_tangent_sections_and_ray_relief():
+    chords = Sections(0.0, np.array([100.0, 50.0]), np.array([0.0, 300.0]))
+    far = tangent_sections(chords, 0.9, 1e9, 0.0)  # orthographic: the chord itself
+    np.testing.assert_allclose(far.half_width, chords.half_width)
+    np.testing.assert_allclose(far.centre, chords.centre)
+    near = tangent_sections(chords, 0.9, 500.0, 0.0)
+    assert near.half_width[0] < 100.0 and near.centre[0] == pytest.approx(0.0)  # centred: narrower, in place
+    assert near.centre[1] < 300.0  # off-centre: the rays spread apart outward, so the section sits nearer the centre
+    # Each chord end is a ray tangent to its section (the ray relief's square root at 0 there).
+    for station, end in ((0.5, -100.0), (0.5, 100.0), (1.5, 250.0), (1.5, 350.0)):
+        half, centre = near.at(np.array([station]))
+        slope = end / 500.0
+        assert (end - centre[0]) ** 2 == pytest.approx(half[0] ** 2 * (1 + (0.9 * slope) ** 2), rel=1e-9)
+    # A section wholly off the image centre: the rim facing away from it lies behind the widest line.
+    rims = ray_section_relief(near, np.full(2, 1.5), np.array([250.0, 350.0]), np.array([0.5, 0.7]), 0.9)
+    assert rims[0] < 0.0 < rims[1]
+    # At slope 0 the relief is the half ellipse; finite for any ray, 0 off the sections' ends.
+    t = np.array([-50.0, 0.0, 99.0])
+    np.testing.assert_allclose(ray_section_relief(chords, np.full(3, 0.5), t, np.zeros(3), 0.9),
+                               0.9 * np.sqrt(100.0 ** 2 - t ** 2))
+    wild = ray_section_relief(near, np.array([0.5, 0.5, 5.0]), np.array([1e6, -1e6, 0.0]),
+                              np.array([1e3, -1e3, 0.0]), 0.9)
+    assert np.isfinite(wild).all() and wild[2] == 0.0
 
 
 def test_each_view_can_have_its_own_known_focal():

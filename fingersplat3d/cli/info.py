@@ -43,7 +43,7 @@ def describe(capture) -> dict:
 def describe_reconstruction(folder: Path) -> dict:
     """What a reconstruction folder says of itself: its cameras (``cameras.json``) and what its ``report.json``
     recorded (registration, how sure, warnings), and which outputs it holds."""
-    from ..eval.poses import rotation_angle_deg
+    from ..eval.poses import view_turn_deg
     from ..io.reconstruction_folder import ReconstructionFolder
 
     folder_read = ReconstructionFolder(folder)
@@ -63,8 +63,8 @@ def describe_reconstruction(folder: Path) -> dict:
         for b in names[i + 1:]:
             if aligned and not (aligned.get(a) and aligned.get(b)):
                 continue
-            turn = rotation_angle_deg(cameras.cameras[b].rotation @ cameras.cameras[a].rotation.T, np.eye(3))
-            pairs.append({"pair": f"{a}-{b}", "turn_deg": round(float(turn), 2),
+            turn, roll = view_turn_deg(cameras.cameras[a].rotation, cameras.cameras[b].rotation)
+            pairs.append({"pair": f"{a}-{b}", "turn_deg": round(turn, 2), "roll_deg": round(roll, 2),
                           "uncertainty_deg": uncertainty.get(f"{a}-{b}"), "moves_with_focal_deg": sensitivity.get(f"{a}-{b}"),
                           "held_at_least_turn": f"{a}-{b}" in (alignment.get("turn_held_at_bound") or [])})
     splat = report.get("splat") if isinstance(report.get("splat"), dict) else {}
@@ -82,6 +82,8 @@ def describe_reconstruction(folder: Path) -> dict:
 
 
 def _print_reconstruction(described: dict) -> None:
+    from ..eval.poses import ROLL_NOTED_DEG
+
     head = {k: v for k, v in described.items() if k not in ("views", "pairs", "warnings", "psnr_in_mask_db")}
     print(", ".join(f"{k}: {', '.join(v) if isinstance(v, list) else v}" for k, v in head.items()))
     psnr = described.get("psnr_in_mask_db") or {}
@@ -96,7 +98,9 @@ def _print_reconstruction(described: dict) -> None:
         off = "10 % off" if described.get("focal_held_by_photos") is not False else "held shorter"
         moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal {off}"
         held = ", held at the least turn its silhouettes allow (it may be larger)" if pair.get("held_at_least_turn") else ""
-        print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + sure + moves + held)
+        roll = pair.get("roll_deg") or 0.0
+        rolled = f" (and rolled {roll:.0f}° about the optical axis, as a photo turned in its plane)" if abs(roll) >= ROLL_NOTED_DEG else ""
+        print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + rolled + sure + moves + held)
     for warning in described["warnings"]:
         print(f"  warning: {warning}")
 

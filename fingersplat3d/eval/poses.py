@@ -11,11 +11,12 @@ Pure numpy: no Open3D, no files.
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
 
-__all__ = ["rotation_angle_deg", "vector_angle_deg", "view_pairs", "relative_rotation_errors",
+__all__ = ["ROLL_NOTED_DEG", "rotation_angle_deg", "vector_angle_deg", "view_turn_deg", "view_pairs", "relative_rotation_errors",
            "translation_direction_errors", "world_similarity"]
 
 
@@ -47,6 +48,27 @@ def vector_angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray | float:
     zero = (np.linalg.norm(a, axis=-1) == 0) | (np.linalg.norm(b, axis=-1) == 0)
     angle = np.where(zero, np.nan, np.degrees(np.arctan2(cross, dot)))
     return float(angle) if angle.ndim == 0 else angle
+
+
+ROLL_NOTED_DEG = 5.0
+"""A roll between two cameras about the optical axis (:func:`view_turn_deg`) that the commands name beside the turn:
+cameras on one ring, or one camera turning about a finger, roll less."""
+
+
+def view_turn_deg(R_a: np.ndarray, R_b: np.ndarray) -> tuple[float, float]:
+    """How far camera b is turned from camera a (``world_to_cam`` rotations ``[3, 3]``), in degrees: the angle between
+    their optical axes (the turn about the finger, what a rig's "cameras 45° apart" means) and the roll about b's
+    axis that is left (a photo stored portrait, a phone held turned: -180 to 180, swing-twist about the axis).
+
+    The rotation's own angle mixes the two: a side camera 45° off whose photo is stored portrait turns 97°.
+    """
+    from scipy.spatial.transform import Rotation
+
+    R_a, R_b = np.asarray(R_a, np.float64), np.asarray(R_b, np.float64)
+    turn = vector_angle_deg(R_a[2], R_b[2])
+    x, y, z, w = Rotation.from_matrix(R_b @ R_a.T).as_quat()  # camera a's coordinates into b's
+    roll = math.degrees(2.0 * math.atan2(z, w))
+    return float(turn), float((roll + 180.0) % 360.0 - 180.0)
 
 
 def view_pairs(count: int) -> np.ndarray:

@@ -109,11 +109,11 @@ def two_view_turn_errors(three, twos: dict) -> dict:
 
 
 def pair_angles_deg(rotations) -> dict[str, float]:
-    """Per view pair ``"ij"`` (i < j): the angle (degrees) of the relative rotation between the views' world-to-camera
-    rotations ``[3, 3]``."""
-    from ..eval.poses import rotation_angle_deg
+    """Per view pair ``"ij"`` (i < j): the turn (degrees) between the views' optical axes, from their world-to-camera
+    rotations ``[3, 3]`` (:func:`~fingersplat3d.eval.poses.view_turn_deg`: a camera stored portrait turns as it is)."""
+    from ..eval.poses import view_turn_deg
 
-    return {f"{i}{j}": float(rotation_angle_deg(rotations[j] @ rotations[i].T, np.eye(3)))
+    return {f"{i}{j}": view_turn_deg(rotations[i], rotations[j])[0]
             for i in range(len(rotations)) for j in range(i + 1, len(rotations))}
 
 

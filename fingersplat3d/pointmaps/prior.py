@@ -42,7 +42,7 @@ from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
 from ..segment.side_cut import side_cut_widths
-from ..segment.silhouette import WidthReference, along_axis, capture_axes, chord_sections, finger_axis
+from ..segment.silhouette import Sections, WidthReference, along_axis, capture_axes, chord_sections, finger_axis
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -55,7 +55,7 @@ CONFIDENCE_FLOOR = 0.01  # every mask pixel keeps a point: confidence > 0 inside
 class FingerHeight(NamedTuple):
     """The inflated silhouette of one view."""
 
-    height: np.ndarray  # [H, W] float32 >= 0, pixels of relief toward the camera, 0 outside the mask
+    height: np.ndarray  # [H, W] float32, pixels of relief toward the camera (below 0 at a rim behind the widest line), 0 outside the mask
     confidence: np.ndarray  # [H, W] float32 in [0, 1], 0 outside the mask
     axis: np.ndarray  # [2] unit (du, dv) direction of the finger axis in the image
 
@@ -196,16 +196,57 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     t = du * normal[0] + dv * normal[1]
     on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
     sections = chord_sections(s, t, on_border, smoothing, along_axis(widths, origin, axis))
-    relief = sections.height(s, t) * depth_ratio
-    if focal is not None:
+    if focal is None:
+        relief = sections.height(s, t) * depth_ratio
+    else:
         centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0]) - origin
         s_c, t_c = float(centre @ axis), float(centre @ normal)
+        sections = tangent_sections(sections, depth_ratio, focal, t_c)
+        slope = (t - t_c) / focal
+        relief = np.zeros(s.shape)
         for _ in range(PERSPECTIVE_ITERATIONS):
             shrink = 1.0 - np.minimum(relief, MAX_RELIEF * focal) / focal
-            relief = sections.height(s_c + (s - s_c) * shrink, t_c + (t - t_c) * shrink) * depth_ratio
+            relief = ray_section_relief(sections, s_c + (s - s_c) * shrink, t, slope, depth_ratio)
     height = np.zeros((rows, cols), np.float32)
     height[v, u] = relief
     return FingerHeight(height, _confidence(height, mask, confidence_knee), axis)
+
+
+def tangent_sections(sections: Sections, ratio: float, focal: float, t_c: float) -> Sections:
+    """The sections whose outline rays are tangent to them in perspective (a chord's ends are rays that graze the
+    finger, not its widest line).
+
+    Per station, the section is the ellipse of half-width ``a`` and depth ``ratio * a`` centred on the plane
+    ``z = focal`` (pixel units there); the ray through across-coordinate ``e`` has slope ``m = (e - t_c) / focal``
+    and grazes the ellipse where ``e - c = ±a sqrt(1 + ratio^2 m^2)``. Both chord ends on tangent rays give
+    ``a = (e2 - e1) / (S1 + S2)`` and ``c = e1 + a S1``, ``S = sqrt(1 + ratio^2 m^2)``: narrower than the chord by
+    about ``ratio^2 m^2 / 2`` (1.5 % for a finger 600 px wide at a 1660 px focal), and moved toward the image centre.
+    Orthographic (``focal`` -> inf), the chord itself."""
+    low = sections.centre - sections.half_width
+    high = sections.centre + sections.half_width
+    s_low = np.sqrt(1.0 + (ratio * (low - t_c) / focal) ** 2)
+    s_high = np.sqrt(1.0 + (ratio * (high - t_c) / focal) ** 2)
+    half_width = (high - low) / (s_low + s_high)
+    return Sections(sections.start, half_width, low + half_width * s_low)
+
+
+def ray_section_relief(sections: Sections, s: np.ndarray, t: np.ndarray, slope: np.ndarray,
+                       ratio: float) -> np.ndarray:
+    """Relief (pixels toward the camera from the plane ``z = focal``) where the ray of across-coordinate ``t`` and
+    across slope ``slope`` first meets the section at station ``s``: the nearer root of
+    ``((d - m h) / a)^2 + (h / (ratio a))^2 = 1``, ``d = t - c(s)``, written without cancellation as
+    ``h = ratio (ratio d m + sqrt(a^2 (1 + ratio^2 m^2) - d^2)) / (1 + ratio^2 m^2)``. A ray that passes the
+    section by less than the outline's quantisation takes its tangent point (the square root held at 0); off the
+    sections' ends, 0. Negative on the flank that faces away from the image centre (its rim lies behind the
+    widest line). At ``slope`` 0 it is ``ratio * sqrt(a^2 - d^2)``."""
+    station = s - sections.start
+    half, centre = sections.at(s)
+    d = t - centre
+    k2m2 = (ratio * slope) ** 2
+    root = np.sqrt(np.maximum(half * half * (1.0 + k2m2) - d * d, 0.0))
+    relief = ratio * (ratio * d * slope + root) / (1.0 + k2m2)
+    outside = (station < -0.5) | (station > sections.half_width.size + 0.5)
+    return np.where(outside, 0.0, relief)
 
 
 def _confidence(height: np.ndarray, mask: np.ndarray, knee: float) -> np.ndarray:
