@@ -194,6 +194,20 @@ def test_a_photo_given_twice_re_encoded_is_monocular_mode_and_a_moved_one_is_not
     assert result.report["pairs"][0]["reason"].startswith("identical images")
 
 
+def test_a_photo_given_twice_beside_others_is_fused_once(uwa):
+    """A copy of one photo beside the other photos adds no view of the finger: the capture is fused with each picture
+    once (the same cameras as without the copy), and the copy is named in a warning and in the report."""
+    views = [uwa[name].with_(camera=None, depth=None) for name in ("left", "center", "right")]
+    copy = views[1].with_(name="center-again", image=views[1].image + np.float32(0.5 / 255))
+    once = fuse(Capture(tuple(views), uwa.metadata), GEOMETRY)
+    twice = fuse(Capture((views[0], views[1], copy, views[2]), uwa.metadata), GEOMETRY)
+    assert twice.capture.names == once.capture.names == ["left", "center", "right"]
+    assert twice.report["same_picture_as"] == {"center-again": "center"}
+    assert any("'center-again' is the same picture as view 'center'" in w for w in twice.report["warnings"])
+    for a, b in zip(once.cameras, twice.cameras):
+        np.testing.assert_allclose(a.world_to_cam, b.world_to_cam, atol=1e-9)
+
+
 def test_the_same_photo_moved_registers_but_backs_no_depth(uwa):
     """The same photo moved by a few pixels: another picture, registered at no turn, yet seen from one place: none of
     its surface is backed by a second view, and the run says so."""
