@@ -250,10 +250,25 @@ finger differs by its ridges (the same photo moved by one pixel 0.065, CFPose-st
 the real rig's cameras 0.53)."""
 
 
+RESIZED_COPY = 0.02
+"""Images whose sides differ by more than this share, both by one factor (to the pixel), are compared at the smaller's
+size for :data:`SAME_PICTURE`: a copy at another size (a thumbnail, a photo exported smaller); a crop of a row or two is
+another picture."""
+
+
 def _same_picture(a: np.ndarray, b: np.ndarray) -> bool:
-    """See :data:`SAME_PICTURE`."""
+    """See :data:`SAME_PICTURE` and :data:`RESIZED_COPY`."""
     if a.shape != b.shape:
-        return False
+        if a.shape[0] * a.shape[1] > b.shape[0] * b.shape[1]:
+            a, b = b, a  # a the smaller
+        (rows_a, cols_a), (rows_b, cols_b) = a.shape[:2], b.shape[:2]
+        across, down = cols_a / cols_b, rows_a / rows_b  # the shrink factors, each to the pixel
+        if (a.shape[2:] != b.shape[2:] or across > 1.0 - RESIZED_COPY
+                or abs(across - down) > 1.0 / min(rows_b, cols_b)):
+            return False
+        import cv2
+
+        b = cv2.resize(np.asarray(b, np.float32), (cols_a, rows_a), interpolation=cv2.INTER_AREA)
     spread = float(np.std(a))
     if spread == 0.0:
         return bool(np.array_equal(a, b))
@@ -285,8 +300,8 @@ def _fused_once(capture: Capture, copies: dict[int, int], config: FuseConfig | N
     for the two photos alone). The copies are named in a warning and in ``report["same_picture_as"]``."""
     names, said = capture.names, {}
     for b, a in copies.items():
-        warn(said, f"view {names[b]!r} is the same picture as view {names[a]!r} (a copy, or re-encoded): it is fused "
-                   f"once, as {names[a]!r}; a copy adds no view of the finger")
+        warn(said, f"view {names[b]!r} is the same picture as view {names[a]!r} (a copy, re-encoded or resized): it "
+                   f"is fused once, as {names[a]!r}; a copy adds no view of the finger")
     kept = Capture(tuple(view for v, view in enumerate(capture.views) if v not in copies), capture.metadata)
     result = fuse(kept, config, progress)
     result.report["warnings"] = said["warnings"] + result.report.get("warnings", [])

@@ -188,6 +188,11 @@ def test_a_photo_given_twice_re_encoded_is_monocular_mode_and_a_moved_one_is_not
     assert _same_picture(image, again.astype(np.float32)) and _same_picture(image, noisy)
     assert not _same_picture(image, np.roll(image, 1, axis=1)) and not _same_picture(image, image[:-1])
     assert not _same_picture(image, uwa["left"].image)
+    for size in ((480, 384), (960, 768), (213, 170)):  # a copy at another size, to the pixel: the same picture
+        resized = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+        assert _same_picture(image, resized) and _same_picture(resized, image)
+    assert not _same_picture(image, cv2.resize(uwa["left"].image, (480, 384), interpolation=cv2.INTER_AREA))
+    assert not _same_picture(image, cv2.resize(image, (480, 300)))  # stretched: another picture
     twins = Capture((View("a", image), View("b", again.astype(np.float32))))
     result = fuse(twins, GEOMETRY)
     assert result.report["alignment"]["mode"] == "monocular"
