@@ -70,13 +70,10 @@ def _thumbnails(folder: Path, capture) -> None:
 
 def _render_arc(folder: Path, result, count: int) -> None:
     from ..io.renders import write_renders
-    from ..splat.novel import arc_views
+    from ..splat.novel import arc_views_at
 
-    # One factor for every camera, from the longest side: a camera stored portrait among landscape ones (UWA's
-    # 1_1_4_1_0.jpg) keeps its twins' scale, so the arc can turn it back (the arc needs one image size).
-    factor = THUMB_WIDTH * 2 / max(max(camera.size) for camera in result.cameras)
-    cameras = [camera.scaled(factor) for camera in result.cameras]
-    write_renders(folder / "renders", arc_views(result.gaussians, cameras, count), result.units, result.scale_mm_per_unit)
+    write_renders(folder / "renders", arc_views_at(result.gaussians, result.cameras, count, THUMB_WIDTH * 2), result.units,
+                  result.scale_mm_per_unit)
 
 
 def record_failure(out: Path, row: dict) -> Path:

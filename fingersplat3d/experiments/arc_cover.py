@@ -32,11 +32,10 @@ def arc_cover(folder: Path, count: int = 12, width: int = 640) -> dict:
     ``{"holes": share under 0.5, "thin": share under 0.9, "views": scored views}`` over the views' fingers together."""
     from ..io.cameras import read_cameras
     from ..io.gaussians_ply import read_gaussians_ply
-    from ..splat.novel import arc_views
+    from ..splat.novel import arc_views_at
 
     cameras = list(read_cameras(Path(folder) / "cameras.json").cameras.values())
     gaussians = read_gaussians_ply(Path(folder) / "gaussians.ply")
-    factor = width / max(max(camera.size) for camera in cameras)
-    views = arc_views(gaussians, [camera.scaled(factor) for camera in cameras], count)[1:-1]
+    views = arc_views_at(gaussians, cameras, count, width)[1:-1]
     totals = np.sum([cover_gaps(view.alpha) for view in views], axis=0)
     return {"holes": float(totals[1] / max(totals[0], 1)), "thin": float(totals[2] / max(totals[0], 1)), "views": len(views)}

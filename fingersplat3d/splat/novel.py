@@ -16,7 +16,7 @@ from .camera_path import arc_cameras
 from .fit import near_plane, render_camera
 from .gaussians import Gaussians
 
-__all__ = ["NovelView", "render_views", "arc_views", "opacity_share"]
+__all__ = ["NovelView", "render_views", "arc_views", "arc_views_at", "opacity_share"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,3 +65,11 @@ def arc_views(gaussians: Gaussians, cameras: Sequence[Camera], count: int) -> li
     """``count`` views ``arc_00``, ``arc_01``, ... on the arc from the leftmost to the rightmost of ``cameras``
     (:func:`~fingersplat3d.splat.camera_path.arc_cameras`; ``ValueError`` when they do not span one)."""
     return render_views(gaussians, [(f"arc_{k:02d}", camera) for k, camera in enumerate(arc_cameras(cameras, count))])
+
+
+def arc_views_at(gaussians: Gaussians, cameras: Sequence[Camera], count: int, longest_side: float) -> list[NovelView]:
+    """:func:`arc_views` with every camera scaled by one factor, the longest side of any of them to ``longest_side``
+    pixels: a camera stored portrait among landscape ones (UWA's 1_1_4_1_0.jpg) keeps its twins' scale, so the arc
+    can turn it back (the arc needs one image size)."""
+    factor = longest_side / max(max(camera.size) for camera in cameras)
+    return arc_views(gaussians, [camera.scaled(factor) for camera in cameras], count)
