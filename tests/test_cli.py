@@ -151,7 +151,8 @@ def test_info_describes_a_reconstruction_folder(tmp_path, capsys):
     poses = []
     for degrees, roll in ((0.0, 0.0), (30.0, 90.0), (75.0, 0.0)):  # b's photo stored portrait: its camera rolled 90°
         pose = np.eye(4)
-        pose[:3, :3] = (Rotation.from_euler("z", roll, degrees=True) * Rotation.from_euler("y", degrees, degrees=True)).as_matrix()
+        turned = Rotation.from_euler("z", roll, degrees=True) * Rotation.from_euler("y", degrees, degrees=True)
+        pose[:3, :3] = turned.as_matrix()
         poses.append(pose)
     write_cameras(rec / "cameras.json", [(name, f"{name}.png", Camera.from_focal(1500.0, 640, 512, pose))
                                          for name, pose in zip(("a", "b", "c"), poses)])

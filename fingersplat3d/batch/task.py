@@ -72,8 +72,8 @@ def _render_arc(folder: Path, result, count: int) -> None:
     from ..io.renders import write_renders
     from ..splat.novel import arc_views_at
 
-    write_renders(folder / "renders", arc_views_at(result.gaussians, result.cameras, count, THUMB_WIDTH * 2), result.units,
-                  result.scale_mm_per_unit)
+    views = arc_views_at(result.gaussians, result.cameras, count, THUMB_WIDTH * 2)
+    write_renders(folder / "renders", views, result.units, result.scale_mm_per_unit)
 
 
 def record_failure(out: Path, row: dict) -> Path:

@@ -16,8 +16,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["ROLL_NOTED_DEG", "rotation_angle_deg", "vector_angle_deg", "view_turn_deg", "view_pairs", "relative_rotation_errors",
-           "translation_direction_errors", "world_similarity"]
+__all__ = ["ROLL_NOTED_DEG", "rotation_angle_deg", "vector_angle_deg", "view_turn_deg", "view_pairs",
+           "relative_rotation_errors", "translation_direction_errors", "world_similarity"]
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray | float:

@@ -16,7 +16,8 @@ width, and the visible half of the slice rises above that chord like a half elli
    uniformly along the axis (a cylinder, and an ellipsoidal tip cap, rounded in both directions);
 5. that relief is ray cast through the guessed pinhole, focal ``f = focal_factor * max(W, H)`` and
    principal point at the image centre (see :func:`finger_height`: off-axis rays see round the
-   finger's side and over its tip), and depth is ``z = f - h`` (so near the finger one unit is
+   finger's side and over its tip, and the outline's rays graze each section in front of its
+   widest line, so the section is the ellipse they touch, not the chord's), and depth is ``z = f - h`` (so near the finger one unit is
    about one pixel; units are arbitrary and the global alignment refines focal and scale),
    points ``X = z K^-1 [u, v, 1]``;
 6. confidence is the facing ratio of the modelled surface, ``n_z = 1 / sqrt(1 + |grad h|^2)``,
@@ -55,7 +56,8 @@ CONFIDENCE_FLOOR = 0.01  # every mask pixel keeps a point: confidence > 0 inside
 class FingerHeight(NamedTuple):
     """The inflated silhouette of one view."""
 
-    height: np.ndarray  # [H, W] float32, pixels of relief toward the camera (below 0 at a rim behind the widest line), 0 outside the mask
+    height: np.ndarray  # [H, W] float32, pixels of relief toward the camera, 0 outside the mask (below 0 at a rim
+    # behind the section's widest line: the flank facing away from the image centre, in perspective)
     confidence: np.ndarray  # [H, W] float32 in [0, 1], 0 outside the mask
     axis: np.ndarray  # [2] unit (du, dv) direction of the finger axis in the image
 
@@ -173,14 +175,13 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     """Relief (pixels) and confidence of a finger silhouette under the swept-section model.
 
     With ``focal`` (pixels) the relief is ray cast in perspective: the model is the swept
-    surface standing on the image plane moved out to ``z0 = focal`` (silhouette where it is
-    seen), and pixel ``p``'s ray meets it above ``q = c + (p - c) * (1 - h(q) / focal)``
-    (``c`` the principal point at the image centre), solved by fixed-point iteration from
-    ``h(p)``: where the finger covers the image centre the relief grows toward ``c``, so the
-    iterates rise monotonically to the first hit without overshooting. Off the
-    optical axis the camera sees round the finger's side and over its tip, so the relief
-    seen at a pixel is the model's a little further from the image centre. Without ``focal``
-    the relief is orthographic, ``h(p)``. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s;
+    surface whose sections are centred on the image plane moved out to ``z0 = focal``, each the
+    ellipse that the outline's two rays graze (:func:`tangent_sections`), and pixel ``p``'s ray
+    meets it where :func:`ray_section_relief` says, across the finger in closed form, along it
+    at the station ``s_c + (s - s_c) * (1 - h / focal)`` by fixed-point iteration (``c`` the
+    principal point at the image centre): off the optical axis the camera sees round the
+    finger's side and over its tip. Without ``focal`` the relief is orthographic, the chords
+    the sections' widest lines. ``hint``: :func:`~fingersplat3d.segment.silhouette.finger_axis`'s;
     ``widths``: the chord half-widths the capture's other views give where the frame cuts this one along its side
     (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`); ``axis``: ``finger_axis(mask, hint)`` when the caller
     has it already.
