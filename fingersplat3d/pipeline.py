@@ -275,12 +275,12 @@ def _same_picture(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)) <= SAME_PICTURE * spread)
 
 
-def _distinct_pairs(capture: Capture) -> list[tuple[int, int]]:
+def _distinct_pairs(capture: Capture, copies: dict[int, int] | None = None) -> list[tuple[int, int]]:
     """View pairs ``a < b`` that are not the same picture (:data:`SAME_PICTURE`): one photo twice has no parallax, the
-    paper's monocular mode."""
-    views = capture.views
-    return [(a, b) for a in range(len(views)) for b in range(a + 1, len(views))
-            if not _same_picture(views[a].image, views[b].image)]
+    paper's monocular mode. ``copies``: :func:`_copies` of the capture (or of its photos), when already found."""
+    copies = _copies(capture) if copies is None else copies
+    picture = [copies.get(v, v) for v in range(len(capture))]  # each view's first copy of its picture
+    return [(a, b) for a in range(len(capture)) for b in range(a + 1, len(capture)) if picture[a] != picture[b]]
 
 
 def _copies(capture: Capture) -> dict[int, int]:
@@ -538,9 +538,9 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
     if rig is not None:
         _check_rig(capture, rig)
         refuse_focal_with_rig(config.focal_px, rig)
-    copies = {} if rig is not None else _copies(capture)  # a rig's cameras are its views in order: kept as given
-    if copies and len(copies) < len(capture) - 1:  # a photo given twice beside other photos: each picture fused once
-        return _fused_once(capture, copies, config, progress)
+    copies = _copies(capture)  # on the photos: which of them are the same picture, decided once
+    if rig is None and copies and len(copies) < len(capture) - 1:  # a copy beside other photos: each picture once
+        return _fused_once(capture, copies, config, progress)  # (a rig's cameras are its views in order: kept)
     stages = _Stages()
     report: dict = {"version": __version__, "python": platform.python_version(), "views": capture.names,
                     "settings": asdict(config), "warnings": []}
@@ -557,7 +557,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
             rig = None if rig is None else rig.scaled(scale.factor)
             config = _in_working_pixels(config, scale)
         bar.update()
-        pairs = _distinct_pairs(capture)
+        pairs = _distinct_pairs(capture, copies)
         with step("pointmaps"):
             pointmaps, pair_pointmaps = _pointmaps(capture, pairs, config, report)
         bar.update()

@@ -98,9 +98,8 @@ def _print_reconstruction(described: dict) -> None:
         off = "10 % off" if described.get("focal_held_by_photos") is not False else "held shorter"
         moves = "" if pair["moves_with_focal_deg"] is None else f", moves {pair['moves_with_focal_deg']:.2f}° with the focal {off}"
         held = ", held at the least turn its silhouettes allow (it may be larger)" if pair.get("held_at_least_turn") else ""
-        roll = pair.get("roll_deg") or 0.0
-        rolled = (f" (and rolled {roll:.0f}° about the optical axis, as a photo turned in its plane)"
-                  if abs(roll) >= ROLL_NOTED_DEG else "")
+        rolled = (f" (and rolled {pair['roll_deg']:.0f}° about the optical axis, as a photo turned in its plane)"
+                  if abs(pair["roll_deg"]) >= ROLL_NOTED_DEG else "")
         print(f"  turn {pair['pair']}: {pair['turn_deg']:.2f}°" + rolled + sure + moves + held)
     for warning in described["warnings"]:
         print(f"  warning: {warning}")

@@ -17,9 +17,9 @@ width, and the visible half of the slice rises above that chord like a half elli
 5. that relief is ray cast through the guessed pinhole, focal ``f = focal_factor * max(W, H)`` and
    principal point at the image centre (see :func:`finger_height`: off-axis rays see round the
    finger's side and over its tip, and the outline's rays graze each section in front of its
-   widest line, so the section is the ellipse they touch, not the chord's), and depth is ``z = f - h`` (so near the finger one unit is
-   about one pixel; units are arbitrary and the global alignment refines focal and scale),
-   points ``X = z K^-1 [u, v, 1]``;
+   widest line, so the section is the ellipse they touch, not the chord's), and depth is
+   ``z = f - h`` (so near the finger one unit is about one pixel; units are arbitrary and the global
+   alignment refines focal and scale), points ``X = z K^-1 [u, v, 1]``;
 6. confidence is the facing ratio of the modelled surface, ``n_z = 1 / sqrt(1 + |grad h|^2)``,
    ramped to 1 at ``confidence_knee``: 1 over the frontal part of the finger, small at the
    silhouette rim and the fingertip, where depth is steepest and a pixel of outline error costs
