@@ -9,6 +9,7 @@ import pytest
 
 from fingersplat3d.cli import main
 from fingersplat3d.errors import EXIT_INCOMPLETE, EXIT_INPUT, InputError
+from fingersplat3d.eval.contact import MARGIN
 from fingersplat3d.eval.fingerprint import nbis_available
 from fingersplat3d.eval.rolled_truth import fit_minutiae_similarity, located_minutiae, placed_minutiae
 from fingersplat3d.prints.enhance import gabor_enhance
@@ -236,6 +237,12 @@ def test_the_rolled_print_of_a_true_model_is_a_500_ppi_print_of_its_skin():
     period_mm = json.loads((SAMPLE / "minutiae.json").read_text())["ridge_period_mm"]
     assert result.period_px == pytest.approx(period_mm * 500 / 25.4, rel=0.2)  # ~500 ppi
     assert result.coverage_deg >= 150  # three views 45 degrees apart
+    # Cut to its skin: MARGIN white pixels on every side, not the chart's whole finger (the crease and beyond).
+    rows, cols = np.flatnonzero(result.mask.any(1)), np.flatnonzero(result.mask.any(0))
+    assert (rows[0], cols[0]) == (MARGIN, MARGIN)
+    assert (result.mask.shape[0] - 1 - rows[-1], result.mask.shape[1] - 1 - cols[-1]) == (MARGIN, MARGIN)
+    assert result.image.shape == result.mask.shape == result.points.shape[:2]
+    assert cols[0] < result.origin_px[0] < cols[-1]  # the pad's centre line, moved with the cut
     points = result.points[result.mask]
     assert np.all(np.isfinite(points)) and np.all(np.isnan(result.points[~result.mask]))
     assert sum(result.view_share.values()) == pytest.approx(1.0)
