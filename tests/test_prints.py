@@ -469,3 +469,16 @@ def test_fs3d_print_of_a_photo_unrolled_or_flat(tmp_path):
         u, v = np.rint(xy[inked]).astype(int).T
         assert np.mean(finger[v.clip(0, finger.shape[0] - 1), u.clip(0, finger.shape[1] - 1)]) > 0.95
     assert widths["photo"] > 1.1 * widths["photo flat"]  # the sides laid flat, not foreshortened
+
+
+def test_the_print_window_keeps_the_skin_and_a_margin_within_the_canvas():
+    from fingersplat3d.prints.rolled import _print_window
+
+    mask = np.zeros((50, 60), bool)
+    mask[20:30, 25:40] = True
+    rows, cols = _print_window(mask)
+    assert (rows.start, rows.stop, cols.start, cols.stop) == (20 - MARGIN, 30 + MARGIN, 25 - MARGIN, 40 + MARGIN)
+    mask[:, 55:] = True  # skin to the canvas's edges: the window stops there
+    rows, cols = _print_window(mask)
+    assert (rows.start, rows.stop, cols.stop) == (0, 50, 60)
+    assert _print_window(np.zeros((5, 5), bool)) == (slice(None), slice(None))  # nothing inked: the canvas as it is

@@ -148,7 +148,7 @@ def rolled_print(chart: SkinChart, views: Sequence[PrintView], px_per_unit: floa
     point_map = np.where(mask[..., None], points.reshape(height, width, 3), np.nan).astype(np.float32)
     keep = _print_window(mask)
     return RolledEquivalent(image[keep], mask[keep], point_map[keep], float(px_per_unit), _coverage(chart, views), share,
-                            float(period), (float(-low[0] - keep[1].start), float(-low[1] - keep[0].start)),
+                            float(period), (float(-low[0] - (keep[1].start or 0)), float(-low[1] - (keep[0].start or 0))),
                             chart.frame.pad_from)
 
 
