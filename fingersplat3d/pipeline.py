@@ -145,6 +145,23 @@ def _at_working_scale(capture: Capture, ridge_px: float | None, factor: float | 
     return Capture(tuple(photo), capture.metadata), Capture(tuple(working), capture.metadata), scale
 
 
+def _swollen(photos: Capture) -> list[str]:
+    """A sentence for each view whose mask swells well past the finger's width somewhere
+    (:func:`~.segment.silhouette.outline_swell`): something beside the finger, of the skin's colour and touching it,
+    was kept in the mask, and the view's outline then misleads its turns (phone-like photos on clutter: 10 degrees off,
+    docs/measurements.md, stop 88)."""
+    from .segment.silhouette import OUTLINE_SWELL, outline_swell
+
+    said = []
+    for view in photos.views:
+        swell = outline_swell(view.mask) if view.mask is not None else None
+        if swell is not None and swell > OUTLINE_SWELL:
+            said.append(f"view {view.name!r}: its finger mask is {swell:.1f} times the finger's width at its widest: "
+                        "something touching the finger may have been taken for it, and the turns to this view can be "
+                        "far off; a plainer background, or the finger apart from what it touches, avoids it")
+    return said
+
+
 def _ridgeless(photos: Capture, scale: WorkingScale) -> list[str]:
     """A sentence for each view whose photo shows no ridges (out of focus, blurred: its ridge period, measured for the
     working resolution, is missing or coarser than a finger has; :func:`~.align.correspond.texture.no_ridges`): the
@@ -621,7 +638,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
                 mesh = mesh_from_cloud(cloud)
     finally:
         bar.close()  # before any message: an error is the last line the user sees
-    for message in _ridgeless(photos, scale):
+    for message in _ridgeless(photos, scale) + _swollen(photos):
         warn(report, message)
     backing = multi_view_backing(depths, cameras, [bool(a) for a in alignment.aligned])
     support = backed_shares(backing)

@@ -247,3 +247,36 @@ def test_a_view_cut_along_its_whole_side_keeps_its_own_widths():
     assert side_cut_widths([_pad_view(60, 150), cut_everywhere]) == [None, None]
     assert side_cut_widths([_pad_view(66, 228)]) == [None]
     assert side_cut_widths([capsule(), capsule(radius=55)]) == [None, None]
+
+
+def _finger(shape=(300, 500), width=120, tip_x=80):
+    """A finger entering from the right edge: a bar with a round tip."""
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]]
+    centre = shape[0] / 2
+    bar = (np.abs(rows - centre) <= width / 2) & (cols >= tip_x + width / 2)
+    cap = (rows - centre) ** 2 + (cols - tip_x - width / 2) ** 2 <= (width / 2) ** 2
+    return bar | cap
+
+
+def test_a_patch_joined_to_the_finger_swells_its_outline():
+    from fingersplat3d.segment.silhouette import OUTLINE_SWELL, outline_swell
+
+    finger = _finger()
+    assert outline_swell(finger) == pytest.approx(1.0, abs=0.05)
+    rows, cols = np.mgrid[0:300, 0:500]
+    patch = finger | (((rows - 90) / 70.0) ** 2 + ((cols - 300) / 50.0) ** 2 <= 1)  # a blob touching its side
+    assert outline_swell(patch) > OUTLINE_SWELL
+    side_cut = finger[100:, :]  # the frame cuts the finger along its side: its whole chords are the tip's
+    assert outline_swell(side_cut) is None
+    assert outline_swell(np.zeros((50, 50), bool)) is None and outline_swell(np.ones((50, 50), bool)) is None
+
+
+def test_the_fuse_names_a_view_whose_mask_swells():
+    from fingersplat3d.pipeline import _swollen
+    from fingersplat3d.scene import Capture, View
+
+    rows, cols = np.mgrid[0:300, 0:500]
+    patch = _finger() | (((rows - 90) / 70.0) ** 2 + ((cols - 300) / 50.0) ** 2 <= 1)
+    views = [View("a", np.zeros((300, 500), np.float32), _finger()), View("b", np.zeros((300, 500), np.float32), patch)]
+    said = _swollen(Capture(tuple(views)))
+    assert len(said) == 1 and said[0].startswith("view 'b': its finger mask is")

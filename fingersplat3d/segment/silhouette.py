@@ -30,7 +30,7 @@ from scipy.ndimage import median_filter
 
 __all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
            "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "WidthReference", "local_quadratic",
-           "widest_disc", "TIP_BASES", "SIDE_CUT_WIDTHS"]
+           "widest_disc", "outline_swell", "OUTLINE_SWELL", "TIP_BASES", "SIDE_CUT_WIDTHS"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -80,6 +80,36 @@ def principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray
 CUT_DOMINANCE = 2.0
 """An image edge cuts the finger (:func:`finger_axis`) when it holds this many times as many of the mask's pixels as
 each edge that does not."""
+
+
+OUTLINE_SWELL = 1.3
+"""A finger's widest chord across its axis is at most this many times its median one; a mask wider somewhere holds
+something beside the finger. Measured (docs/measurements.md, stop 88), masks found on the photos: the real dev frames
+1.03-1.16 (54), another group's renders 1.05-1.11, ``fs3d synth`` views 1.01-1.19 (uwa, adult and wide shapes, and
+cfpose: 66), the shipped samples 1.03-1.11, phone-like photos of another make 1.04-1.10 where the mask is right, and
+1.38-3.18 where it kept clutter touching the finger (IoU 0.45-0.91; 1.24 at IoU 0.97 passes)."""
+_MIN_WHOLE_CHORDS = 16  # fewer chords across the whole finger than this say nothing of its width
+
+
+def outline_swell(mask: np.ndarray) -> float | None:
+    """The widest chord across the finger's axis over the median one, over the chords the image border does not cut
+    (:func:`raw_chords` along :func:`finger_axis`); None when fewer than half of them are whole. A finger narrows toward its tip and
+    widens a little toward its base; a patch of something else joined to it makes one stretch much wider
+    (:data:`OUTLINE_SWELL`)."""
+    mask = np.asarray(mask, bool)
+    if mask.sum() < 64:
+        return None
+    axis, origin = finger_axis(mask)
+    rows, cols = np.nonzero(mask)
+    du, dv = cols - origin[0], rows - origin[1]
+    s, t = du * axis[0] + dv * axis[1], dv * axis[0] - du * axis[1]
+    on_border = (cols == 0) | (rows == 0) | (cols == mask.shape[1] - 1) | (rows == mask.shape[0] - 1)
+    low, high, present, cut_low, cut_high = raw_chords(s, t, on_border, float(s.min()))
+    whole = present & ~cut_low & ~cut_high
+    if whole.sum() < max(_MIN_WHOLE_CHORDS, 0.5 * present.sum()):  # a finger the frame cuts along its side: its
+        return None  # whole chords are the tip's, narrower than the finger
+    widths = (high - low)[whole] + 1.0
+    return float(widths.max() / np.median(widths))
 
 
 def widest_disc(mask: np.ndarray) -> float:
@@ -205,9 +235,9 @@ def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
     if max(spread_first, spread_second) < MIN_EXTENT_SPREAD:
         return hints
     if spread_first * EXTENT_STEADINESS <= spread_second:
-        chosen, along = first, 0
+        along = 0  # the first direction's extent holds steady over the views: the finger runs along it
     elif spread_second * EXTENT_STEADINESS <= spread_first:
-        chosen, along = second, 1
+        along = 1
     else:
         return hints
     for (index, axis, _), pair in zip(free, spans):
