@@ -50,19 +50,11 @@ def cut_across(capture, keep: tuple[float, float]):
 def crop_frame(capture, keep: tuple[float, float]):
     """``capture`` with every view cropped to the image columns at the shares ``keep`` of the front view's silhouette
     along the finger (the ring rig's finger runs along the image rows): the frame cuts the finger at both ends."""
-    from fingersplat3d.scene import Camera, Capture
+    from fingersplat3d.experiments.geometry import columns_cropped
 
     cols = np.nonzero(capture["v2"].mask.any(0))[0]
     first, last = (int(round(cols.min() + share * (cols.max() - cols.min()))) for share in keep)
-    views = []
-    for view in capture.views:
-        K = view.camera.K.copy()
-        K[0, 2] -= first
-        camera = Camera(K, view.camera.world_to_cam, last - first + 1, view.height)
-        columns = slice(first, last + 1)
-        views.append(view.with_(image=np.ascontiguousarray(view.image[:, columns]), mask=view.mask[:, columns].copy(),
-                                depth=np.ascontiguousarray(view.depth[:, columns]), camera=camera))
-    return Capture(tuple(views), capture.metadata)
+    return columns_cropped(capture, first, last)
 
 
 def main() -> int:
@@ -80,7 +72,7 @@ def main() -> int:
     keep = tuple(float(x) for x in args.keep.split(","))
     drawn = generate.random_finger_params
     if args.height_ratio > 0:
-        generate.random_finger_params = lambda rng: replace(drawn(rng), height_ratio=args.height_ratio)
+        generate.random_finger_params = lambda rng, *shapes: replace(drawn(rng, *shapes), height_ratio=args.height_ratio)
     with tempfile.TemporaryDirectory() as folder:
         paths = []
         for seed in range(args.seeds):

@@ -46,21 +46,13 @@ def _size(text: str) -> tuple[int, int]:
 def _cropped(capture, widths: float):
     """Every view cut about its centre to ``widths`` of the front view's finger width along the image rows (the finger
     runs along them), the principal point moved with the cut: no tip and no crease in frame."""
-    from fingersplat3d.scene import Camera, Capture
+    from fingersplat3d.experiments.geometry import columns_cropped
     from fingersplat3d.segment.silhouette import widest_disc
 
     front = capture.views[len(capture.views) // 2]
     centre = (front.width - 1) / 2.0
     half = 0.5 * widths * widest_disc(front.mask)
-    first, last = int(np.ceil(centre - half)), int(np.floor(centre + half))
-    views = []
-    for view in capture.views:
-        camera = Camera(view.camera.K - np.array([[0, 0, first], [0, 0, 0], [0, 0, 0]]), view.camera.world_to_cam,
-                        last - first + 1, view.height)
-        keep = (slice(None), slice(first, last + 1))
-        views.append(view.with_(image=np.ascontiguousarray(view.image[keep]), mask=view.mask[keep].copy(),
-                                depth=np.ascontiguousarray(view.depth[keep]), camera=camera))
-    return Capture(tuple(views), capture.metadata)
+    return columns_cropped(capture, int(np.ceil(centre - half)), int(np.floor(centre + half)))
 
 
 def _distorted(capture, k1: float):

@@ -25,7 +25,7 @@ from .process import in_fresh_process, peak_rss_mb
 from ..synth.rigs import CAMERA_DISTANCE_MM
 
 __all__ = ["GeometryCase", "CASES", "RING_ANGLES", "RING_VIEWS", "pick_views", "score_geometry", "synth_captures", "run_geometry",
-           "geometry_table"]
+           "geometry_table", "columns_cropped"]
 
 RING_ANGLES = (-45.0, -22.5, 0.0, 22.5, 45.0)
 RING_VIEWS = {2: ("v0", "v2"), 3: ("v0", "v2", "v4"), 5: ("v0", "v1", "v2", "v3", "v4")}
@@ -86,6 +86,22 @@ def pick_views(capture, case: GeometryCase) -> tuple[str, ...]:
     by_roll = sorted(capture.names, key=lambda name: poses[name]["roll_deg"])
     picked = np.unique(np.round(np.linspace(0, len(by_roll) - 1, case.views)).astype(int))
     return tuple(by_roll[i] for i in picked)
+
+
+def columns_cropped(capture, first: int, last: int):
+    """``capture`` with every view cut to the image columns ``first..last`` (inclusive), as datasets publish crops: its
+    image, mask and true depth cut, its camera's principal point moved with the cut (the truth stays true)."""
+    from ..scene import Camera, Capture
+
+    views = []
+    for view in capture.views:
+        K = view.camera.K.copy()
+        K[0, 2] -= first
+        camera = Camera(K, view.camera.world_to_cam, last - first + 1, view.height)
+        columns = slice(first, last + 1)
+        views.append(view.with_(image=np.ascontiguousarray(view.image[:, columns]), mask=view.mask[:, columns].copy(),
+                                depth=np.ascontiguousarray(view.depth[:, columns]), camera=camera))
+    return Capture(tuple(views), capture.metadata)
 
 
 def score_geometry(result, truth: dict) -> dict:

@@ -31,6 +31,7 @@ RING_DEG = (-45.0, 0.0, 45.0)
 DISTANCE_MM = 54.0  # the real UWA rig's camera-to-finger distance
 FIELD_MM = 41.6  # and what its 1280 px across hold at the finger (focal 1661 px)
 RIDGE_PERIOD_MM = 0.46  # an adult's ridge period: the texture is scaled to it
+X_AXIS, Y_AXIS, Z_AXIS = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -133,12 +134,6 @@ def skin_lookup(texture: SkinTexture, along_mm: np.ndarray, around_mm: np.ndarra
     return texture.mean + weight * (value - texture.mean), slopes
 
 
-def _rotation(axis: str, degrees: float) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_euler(axis, degrees, degrees=True).as_matrix()
-
-
 def _surface(finger: TexturedFinger, stations: int = 260, around: int = 360):
     """The finger's mesh in its own frame (x from the tip's pole toward the hand, pad toward -z): vertices, triangles,
     per vertex the arc lengths along the pad from the pole and round the section from the pad's middle, and the unit
@@ -200,6 +195,7 @@ def textured_capture(finger: TexturedFinger, texture: SkinTexture, *, size: tupl
     import open3d as o3d
 
     from ..scene import Camera, Capture, View, look_at
+    from ..synth.rigs import rotation_about
 
     rng = np.random.default_rng(seed)
     # long enough to leave the frame whatever the framing (a hand behind it, not a stub's cut end)
@@ -207,7 +203,8 @@ def textured_capture(finger: TexturedFinger, texture: SkinTexture, *, size: tupl
     vertices, triangles, along, around, tangents = _surface(finger)
     # The finger in the world: the tip pole 0.35 of the field left of the front image's centre, axis along world x,
     # pad toward -z (the cameras).
-    pose = _rotation("x", finger.roll_deg) @ _rotation("y", finger.pitch_deg) @ _rotation("z", finger.yaw_deg)
+    pose = rotation_about(X_AXIS, finger.roll_deg) @ rotation_about(Y_AXIS, finger.pitch_deg) \
+        @ rotation_about(Z_AXIS, finger.yaw_deg)
     tip = np.array([-0.35 * field_mm, 0.0, 0.0]) + np.asarray(finger.offset_mm)
     world = vertices @ pose.T + tip
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(world), o3d.utility.Vector3iVector(triangles))
@@ -222,7 +219,7 @@ def textured_capture(finger: TexturedFinger, texture: SkinTexture, *, size: tupl
     views = []
     along_deg = np.zeros(len(ring_deg)) if along_deg is None else np.asarray(along_deg, np.float64)
     for k, angle in enumerate(ring_deg):
-        turn = _rotation("x", angle) @ _rotation("y", along_deg[k])
+        turn = rotation_about(X_AXIS, angle) @ rotation_about(Y_AXIS, along_deg[k])
         eye = turn @ np.array([0.0, 0.0, -distance_mm])
         zoom = 1.0 if zooms is None else float(zooms[k])
         camera = Camera.from_focal(focal * zoom, width, height,

@@ -43,7 +43,8 @@ from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
 from ..segment.side_cut import side_cut_widths
-from ..segment.silhouette import Sections, WidthReference, along_axis, capture_axes, chord_sections, finger_axis
+from ..segment.silhouette import (Sections, WidthReference, along_axis, axis_coordinates, capture_axes, chord_sections,
+                                  finger_axis, mask_pixels)
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
@@ -188,14 +189,10 @@ def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float 
     """
     mask = np.asarray(mask, bool)
     rows, cols = mask.shape
-    v, u = np.nonzero(mask)
+    u, v, on_border = mask_pixels(mask)
     axis, origin = finger_axis(mask, hint) if axis is None else axis
     normal = np.array([-axis[1], axis[0]])
-    # Coordinates along (s) and across (t) the axis, for the mask pixels only.
-    du, dv = u - origin[0], v - origin[1]
-    s = du * axis[0] + dv * axis[1]
-    t = du * normal[0] + dv * normal[1]
-    on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
+    s, t = axis_coordinates(u, v, axis, origin)  # along and across the axis, for the mask pixels only
     sections = chord_sections(s, t, on_border, smoothing, along_axis(widths, origin, axis))
     if focal is None:
         relief = sections.height(s, t) * depth_ratio

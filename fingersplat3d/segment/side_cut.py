@@ -14,8 +14,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .silhouette import (SilhouetteFrame, WidthReference, capture_axes, finger_axis, orient_frames, raw_chords,
-                         silhouette_frame)
+from .silhouette import (SilhouetteFrame, WidthReference, capture_axes, finger_axis, mask_pixels, orient_frames,
+                         raw_chords, silhouette_frame)
 
 __all__ = ["capture_frames", "side_cut_widths", "SIDE_CUT_SHARE", "MIN_SHARED_STATIONS", "CAP_FALLBACK"]
 
@@ -124,10 +124,8 @@ def _may_be_side_cut(mask: np.ndarray, axis: np.ndarray) -> bool:
 def _station_profile(mask: np.ndarray, frame: SilhouetteFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """A view's raw chords in its frame: each station's distance from the tip, half-width and whether it is whole, and
     the share of its stations the border cuts at one side only."""
-    rows, cols = mask.shape
-    v, u = np.nonzero(mask)
+    u, v, on_border = mask_pixels(mask)
     s, t = frame.coordinates(np.stack([u, v], 1))
-    on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
     s0 = float(s.min())
     low, high, present, cut_low, cut_high = raw_chords(s, t, on_border, s0)
     with np.errstate(invalid="ignore"):

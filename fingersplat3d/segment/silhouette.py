@@ -30,7 +30,8 @@ from scipy.ndimage import median_filter
 
 __all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
            "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "WidthReference", "local_quadratic",
-           "widest_disc", "outline_swell", "OUTLINE_SWELL", "TIP_BASES", "SIDE_CUT_WIDTHS"]
+           "widest_disc", "outline_swell", "OUTLINE_SWELL", "mask_pixels", "axis_coordinates", "TIP_BASES",
+           "SIDE_CUT_WIDTHS"]
 
 TIP_BASES = {
     "outline": "the outline closes at this end and the image border cuts the other",
@@ -91,6 +92,21 @@ cfpose: 66), the shipped samples 1.03-1.11, phone-like photos of another make 1.
 _MIN_WHOLE_CHORDS = 16  # fewer chords across the whole finger than this say nothing of its width
 
 
+def mask_pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mask's pixels: their columns ``u``, rows ``v`` and whether each lies on the image border (where the frame,
+    not the finger's outline, ends a chord)."""
+    rows, cols = mask.shape
+    v, u = np.nonzero(mask)
+    return u, v, (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
+
+
+def axis_coordinates(u: np.ndarray, v: np.ndarray, axis: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels' coordinates from ``origin`` along ``axis`` (``s``) and across it (``t``, along the axis turned by +90
+    degrees in the image: x right, y down)."""
+    du, dv = u - origin[0], v - origin[1]
+    return du * axis[0] + dv * axis[1], du * -axis[1] + dv * axis[0]
+
+
 def outline_swell(mask: np.ndarray) -> float | None:
     """The widest chord across the finger's axis over the median one, over the chords the image border does not cut
     (:func:`raw_chords` along :func:`finger_axis`); None when fewer than half of them are whole. A finger narrows toward its tip and
@@ -100,10 +116,8 @@ def outline_swell(mask: np.ndarray) -> float | None:
     if mask.sum() < 64:
         return None
     axis, origin = finger_axis(mask)
-    rows, cols = np.nonzero(mask)
-    du, dv = cols - origin[0], rows - origin[1]
-    s, t = du * axis[0] + dv * axis[1], dv * axis[0] - du * axis[1]
-    on_border = (cols == 0) | (rows == 0) | (cols == mask.shape[1] - 1) | (rows == mask.shape[0] - 1)
+    u, v, on_border = mask_pixels(mask)
+    s, t = axis_coordinates(u, v, axis, origin)
     low, high, present, cut_low, cut_high = raw_chords(s, t, on_border, float(s.min()))
     whole = present & ~cut_low & ~cut_high
     if whole.sum() < max(_MIN_WHOLE_CHORDS, 0.5 * present.sum()):  # a finger the frame cuts along its side: its
@@ -426,15 +440,12 @@ def silhouette_frame(mask: np.ndarray, smoothing: float = 0.15, toward: np.ndarr
     this one along its side (:func:`~fingersplat3d.segment.side_cut.side_cut_widths`).
     """
     mask = np.asarray(mask, bool)
-    rows, cols = mask.shape
-    v, u = np.nonzero(mask)
+    u, v, on_border = mask_pixels(mask)
     axis, origin = finger_axis(mask, hint)
-    on_border = (u == 0) | (v == 0) | (u == cols - 1) | (v == rows - 1)
 
     def chords(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, Sections]:
         normal = np.array([-direction[1], direction[0]])
-        s = (u - origin[0]) * direction[0] + (v - origin[1]) * direction[1]
-        t = (u - origin[0]) * normal[0] + (v - origin[1]) * normal[1]
+        s, t = axis_coordinates(u, v, direction, origin)
         return s, normal, chord_sections(s, t, on_border, smoothing, along_axis(widths, origin, direction))
 
     s, normal, sections = chords(axis)
