@@ -138,10 +138,11 @@ class _Stages:
         self.records[name] = {"seconds": round(time.perf_counter() - start, 3), "peak_rss_mb": round(peak_kb / 1024, 1)}
 
 
-def _at_working_scale(capture: Capture, ridge_px: float | None, factor: float | None = None
+def _at_working_scale(capture: Capture, ridge_px: float | None, factor: float | None = None, windows: bool = False
                       ) -> tuple[Capture, Capture, WorkingScale]:
-    """(the photos with their masks, the same at the working resolution, the scale between them)."""
-    photo, working, scale = working_views(capture.views, ridge_px, factor)
+    """(the photos with their masks, the same at the working resolution, the scale between them); ``windows``: large
+    photos whose finger covers little of them cut to a window round it (:mod:`~fingersplat3d.working_window`)."""
+    photo, working, scale = working_views(capture.views, ridge_px, factor, windows)
     return Capture(tuple(photo), capture.metadata), Capture(tuple(working), capture.metadata), scale
 
 
@@ -200,34 +201,64 @@ def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
 
 
 def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], maps: Sequence[list[np.ndarray] | None],
-                   report: dict) -> tuple[list[Camera], list]:
-    """Cameras and per-view maps of the working resolution put back on the photos' pixel grid."""
+                   report: dict, backing: list[np.ndarray | None] | None = None) -> tuple[list[Camera], list, list | None]:
+    """Cameras and per-view maps of the working resolution put back on the photos' pixel grid (a windowed view's
+    outside its window: NaN, and its camera's principal point moved back to the photo's centre); ``backing``:
+    :func:`~.align.transfer.multi_view_backing`'s maps, put back at their own stride (-1 outside a window)."""
     sizes = [(view.width, view.height) for view in photos.views]
-    if scale.factor == 1.0:
-        return cameras, list(maps)
-    grow = [size[0] / camera.width for camera, size in zip(cameras, sizes)]
-    cameras = [camera.resized(size) for camera, size in zip(cameras, sizes)]
-    out = [None if views is None else [map_on_grid(values, size, view.mask)
-                                       for values, size, view in zip(views, sizes, photos.views)] for views in maps]
+    if scale.factor == 1.0 and not scale.windowed:
+        return cameras, list(maps), backing
+    regions = scale.region_sizes(sizes)
+    grow = [region[0] / camera.width for camera, region in zip(cameras, regions)]
+    cameras = [camera.resized(region) for camera, region in zip(cameras, regions)]
+    cuts = [view.mask if scale.window(v) is None else scale.window(v).cut(view.mask)
+            for v, view in enumerate(photos.views)]
+    out = [None if views is None else [map_on_grid(values, region, mask)
+                                       for values, region, mask in zip(views, regions, cuts)] for views in maps]
+    for v in range(len(photos)):
+        window = scale.window(v)
+        if window is not None:
+            cameras[v] = window.camera_on_photo(cameras[v])
+            for views in out:
+                if views is not None:
+                    views[v] = window.padded(views[v])
+            if backing is not None and backing[v] is not None:
+                backing[v] = _backing_on_photo(backing[v], window)
     alignment = report.get("alignment", {})
     if alignment.get("focals_px") is not None:
         alignment["focals_px"] = [float(f) * g for f, g in zip(alignment["focals_px"], grow)]
     registration = report.get("registration", {})
     if registration.get("pointmaps_redrawn_at_px") is not None:  # one focal for all views: the first view's growth
         registration["pointmaps_redrawn_at_px"] = float(registration["pointmaps_redrawn_at_px"]) * grow[0]
-    return cameras, out
+    return cameras, out, backing
+
+
+def _backing_on_photo(backing: np.ndarray, window) -> np.ndarray:
+    """A windowed view's backing map (its window's pixels at a stride) as the photo's at about the same stride."""
+    import cv2
+
+    stride = window.width / backing.shape[1]
+    inside = (max(1, round(window.width / stride)), max(1, round(window.height / stride)))
+    whole = cv2.resize(backing, inside, interpolation=cv2.INTER_NEAREST)
+    out = np.full((max(1, round(window.photo_height / stride)), max(1, round(window.photo_width / stride))), -1, np.int8)
+    top, left = round(window.top / stride), round(window.left / stride)
+    rows, cols = min(inside[1], out.shape[0] - top), min(inside[0], out.shape[1] - left)
+    out[top:top + rows, left:left + cols] = whole[:rows, :cols]
+    return out
 
 
 def _on_splat_grid(photos: Capture, capture: Capture, scale: WorkingScale, ridge_px: float | None, cameras: list[Camera],
                    maps: Sequence[list[np.ndarray]], report: dict) -> tuple[Capture, WorkingScale, list[Camera], list, list[float]]:
     """The working capture, its cameras and per-view maps carried from the geometry's grid onto the splat fit's
-    (``ridge_px`` working pixels per ridge, :data:`~fingersplat3d.working_scale.SPLAT_RIDGE_PX` by default), with that
-    grid's scale and each view's growth (its pixels per geometry pixel); as they are where the two grids are one."""
+    (``ridge_px`` working pixels per ridge, :data:`~fingersplat3d.working_scale.SPLAT_RIDGE_PX` by default; the same
+    windows), with that grid's scale and each view's growth (its pixels per geometry pixel); as they are where the two
+    grids are one."""
     sizes = [(view.width, view.height) for view in photos.views]
     fit = scale.at(ridge_px, sizes)
     if fit.factor == scale.factor:
         return capture, scale, cameras, list(maps), [1.0] * len(cameras)
-    views = list(photos.views) if fit.factor == 1.0 else working_views(photos.views, None, fit.factor)[1]
+    views = (list(photos.views) if fit.factor == 1.0 and not scale.windowed
+             else working_views(photos.views, None, fit.factor, scale.windows)[1])
     grow = [view.width / camera.width for view, camera in zip(views, cameras)]
     cameras = [camera.resized((view.width, view.height)) for camera, view in zip(cameras, views)]
     maps = [[map_on_grid(values, (view.width, view.height), view.mask) for values, view in zip(per_view, views)]
@@ -571,7 +602,7 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
     try:
         with step("masks"):
-            photos, capture, scale = _at_working_scale(capture, config.ridge_px)
+            photos, capture, scale = _at_working_scale(capture, config.ridge_px, windows=rig is None)
             rig = None if rig is None else rig.scaled(scale.factor)
             config = _in_working_pixels(config, scale)
             swollen = _swollen(capture)  # said with the other warnings, after the progress bar
@@ -655,8 +686,8 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
         focals_px=[float(focal) * g for focal, g in zip(alignment.focals, grow)],
         relief_scale=alignment.relief_scale, spanning_tree=[[capture.views[a].name, capture.views[b].name] for a, b in alignment.tree],
         aligned=dict(zip(capture.names, alignment.aligned)))
-    cameras, (depths, confidences, splat_depths) = _on_photo_grid(
-        photos, scale, cameras, (depths, confidences, splat.depths if splat else None), report)
+    cameras, (depths, confidences, splat_depths), backing = _on_photo_grid(
+        photos, scale, cameras, (depths, confidences, splat.depths if splat else None), report, backing)
     report.update(stages=stages.records, units=units, scale_mm_per_unit=mm_per_unit, points=len(cloud.points))
     return Reconstruction(photos, cameras, depths, confidences, cloud, units, mm_per_unit, report, mesh,
                           splat.gaussians if splat else None, splat_depths, backing)

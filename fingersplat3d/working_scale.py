@@ -15,6 +15,9 @@ pixels than the ridges' look); the outputs (cameras, depth maps, masks) are put 
 * ``factor = ridge_px / period`` (at most 1), one for every view of a capture (views that share a finger share
   its ridges); a factor above :data:`MIN_SHRINK` is not worth a resampling and stays 1, and no view's short side
   goes below :data:`MIN_SIDE`.
+* A photo larger than the survey copy whose finger covers little of it (a phone's photo) is first cut to a window
+  about its centre round the finger (:mod:`fingersplat3d.working_window`, ``windows=True``): the principal point
+  stays at the image's centre, so the cameras are the whole photo's.
 
 Pixel centres are at integer coordinates (``Camera.from_focal`` puts the principal point at ``(W - 1) / 2``), so a
 working pixel ``x`` is the photo's ``(x + 0.5) * W / w - 0.5``, as OpenCV's resizing has it.
@@ -23,16 +26,17 @@ Pure numpy/OpenCV: no Open3D, no files.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import cv2
 import numpy as np
 
-from .align.correspond.texture import measure_ridge_period
+from .align.correspond.texture import measure_ridge_period, ridge_area
 from .errors import InputError
 from .sampling import resized_image, resized_mask
 from .scene import View, scaled_size
+from .working_window import Window, finger_window
 
 __all__ = ["RIDGE_PX", "SPLAT_RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
 
@@ -84,6 +88,19 @@ class WorkingScale:
     """Each view's ridge period in photo pixels (NaN: no ridges measured; empty: not measured)."""
     surveyed_whole: bool = False
     """Whether every view's survey copy was the photo itself (photos of at most :data:`SURVEY_SIDE` px)."""
+    windows: tuple[Window | None, ...] = ()
+    """Each view's working window on its photo (None, or empty: the whole photo; :mod:`fingersplat3d.working_window`)."""
+
+    def window(self, index: int) -> Window | None:
+        return self.windows[index] if index < len(self.windows) else None
+
+    @property
+    def windowed(self) -> bool:
+        return any(window is not None for window in self.windows)
+
+    def region_sizes(self, sizes: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
+        """The part of each photo of ``sizes`` the geometry works on, in photo pixels: its window, or the photo."""
+        return [size if self.window(i) is None else self.window(i).size for i, size in enumerate(sizes)]
 
     def working_view_periods_px(self) -> tuple[float, ...] | None:
         """Each view's ridge period in working pixels when it was measured exactly as the later stages measure it
@@ -100,16 +117,21 @@ class WorkingScale:
 
     def at(self, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> "WorkingScale":
         """The same photos at another number of working pixels per ridge (None: their own resolution)."""
-        return WorkingScale(_factor(self.period_px, ridge_px, sizes), self.period_px, ridge_px, self.view_periods_px,
-                            self.surveyed_whole)
+        return WorkingScale(_factor(self.period_px, ridge_px, self.region_sizes(sizes)), self.period_px, ridge_px,
+                            self.view_periods_px, self.surveyed_whole, self.windows)
 
     def size(self, size: tuple[int, int]) -> tuple[int, int]:
         return size if self.factor == 1.0 else scaled_size(size, self.factor)
 
     def as_report(self, photo_sizes: Sequence[tuple[int, int]]) -> dict:
-        return {"factor": round(self.factor, 4),
-                "ridge_period_photo_px": round(self.period_px, 2) if np.isfinite(self.period_px) else None,
-                "ridge_px_asked": self.ridge_px, "sizes": [list(self.size(size)) for size in photo_sizes]}
+        report = {"factor": round(self.factor, 4),
+                  "ridge_period_photo_px": round(self.period_px, 2) if np.isfinite(self.period_px) else None,
+                  "ridge_px_asked": self.ridge_px,
+                  "sizes": [list(self.size(size)) for size in self.region_sizes(photo_sizes)]}
+        if self.windowed:  # [left, top, width, height] in photo pixels, None for a photo worked on whole
+            report["windows"] = [None if self.window(i) is None else self.window(i).as_report()
+                                 for i in range(len(photo_sizes))]
+        return report
 
 
 @dataclass(frozen=True)
@@ -145,7 +167,11 @@ def _photo_period(view: View, survey: _Survey) -> float:
         return float("nan")
     if seen and min(np.ptp(rows), np.ptp(cols)) + 1 >= SMALL_FINGER_PX:
         return period / factor
-    # centre of the finger: its ridges, away from the rims
+    # the crop's centre: the ridges' (the finger's distal part, where its outline shows the tip), away from the rims; a
+    # long finger's middle, as a phone's photo shows it from far back, is skin without ridges whose pixel noise and
+    # creases gave periods of 3-40 px where the ridges are 13 (docs/measurements.md, stop 89)
+    ridges = ridge_area(mask)
+    rows, cols = np.nonzero(ridges if ridges.any() else mask)
     centre = np.array([np.median(cols), np.median(rows)]) / factor
     half = CROP_SIDE // 2
     left = int(np.clip(centre[0] - half, 0, max(0, view.width - CROP_SIDE)))
@@ -170,12 +196,14 @@ def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int,
     return 1.0 if factor > MIN_SHRINK else float(factor)
 
 
-def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
-                  factor: float | None = None) -> tuple[list[View], list[View], WorkingScale]:
+def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX, factor: float | None = None,
+                  windows: bool | Sequence[Window | None] = False) -> tuple[list[View], list[View], WorkingScale]:
     """``(photo views, working views, scale)``: both with finger masks (the photos' own where given).
 
     ``ridge_px``: working pixels per ridge period (None: the photos' own resolution); ``factor``: a scale to use
-    instead of measuring one (a rig calibration scales all its captures alike).
+    instead of measuring one (a rig calibration scales all its captures alike); ``windows``: True cuts each photo
+    larger than :data:`SURVEY_SIDE` to its finger's window where that keeps little of it
+    (:func:`~fingersplat3d.working_window.finger_window`), or each view's window to use (None: the whole photo).
     """
     if ridge_px is not None and not (np.isfinite(ridge_px) and ridge_px > 0):
         raise InputError(f"pixels per ridge must be a positive number, got {ridge_px}")
@@ -186,16 +214,22 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
         if survey.mask.sum() < 16:
             raise InputError(f"view {view.name!r}: the finger mask has only {int(survey.mask.sum())} pixels")
     sizes = [(view.width, view.height) for view in views]
+    if windows is True:
+        windows = _finger_windows(surveys, sizes)
+    windows = tuple(windows) if windows else ()
     period, periods = float("nan"), []  # not measured when nothing depends on it
     if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
         periods = per_item(lambda pair: _photo_period(*pair), list(zip(views, surveys)))
         period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
-    factor = _factor(period, ridge_px, sizes) if factor is None else factor
-    scale = WorkingScale(float(factor), period, ridge_px, tuple(float(p) for p in periods),
-                         all(survey.factor == 1.0 for survey in surveys))
+    scale = WorkingScale(1.0, period, ridge_px, tuple(float(p) for p in periods),
+                         all(survey.factor == 1.0 for survey in surveys), windows)
+    factor = _factor(period, ridge_px, scale.region_sizes(sizes)) if factor is None else factor
+    scale = replace(scale, factor=float(factor))
 
-    def both(pair: tuple[View, _Survey]) -> tuple[View, View]:
-        view, survey = pair
+    def both(index: int) -> tuple[View, View]:
+        view, survey, window = views[index], surveys[index], scale.window(index)
+        if window is not None:
+            return _windowed(view, survey, window, scale.factor)
         size = scale.size((view.width, view.height))
         same = size == (survey.image.shape[1], survey.image.shape[0])  # the survey copy is the working one
         image = survey.image if same else resized_image(view.image, size)
@@ -212,6 +246,45 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX,
         photo = view.with_(mask=photo_mask)
         return photo, (photo if scale.factor == 1.0 else View(view.name, image, mask))
 
-    pairs = per_item(both, list(zip(views, surveys)))
+    pairs = per_item(both, range(len(views)))
     photo, working = [p for p, _ in pairs], [w for _, w in pairs]
     return photo, working, scale
+
+
+def _finger_windows(surveys: Sequence[_Survey], sizes: Sequence[tuple[int, int]]) -> tuple[Window | None, ...]:
+    """Each view's window (:func:`~fingersplat3d.working_window.finger_window`) on photos larger than the survey copy:
+    photos of one size share one, round all their fingers (one working size for all: one focal in working pixels is
+    one in photo pixels for every view, to the pixel's rounding)."""
+    if len(set(sizes)) == 1 and len({survey.mask.shape for survey in surveys}) == 1:
+        if max(sizes[0]) <= SURVEY_SIDE:
+            return ()
+        union = np.logical_or.reduce([survey.mask for survey in surveys])
+        return (finger_window(union, sizes[0]),) * len(sizes)
+    return tuple(finger_window(survey.mask, size) if max(size) > SURVEY_SIDE else None
+                 for survey, size in zip(surveys, sizes))
+
+
+def _windowed(view: View, survey: _Survey, window: Window, factor: float) -> tuple[View, View]:
+    """``(photo view, working view)`` of a view worked on in ``window``: the working image is the window's part of the
+    photo at ``factor``; its mask the photo's own cut to the window, else found again on the working copy where the
+    whole photo's would be (:func:`working_views`), else the survey copy's carried onto it; the photo's mask the
+    working one put back in the window, nothing outside it."""
+    size = scaled_size(window.size, factor) if factor != 1.0 else window.size
+    image = resized_image(window.cut(view.image), size)
+    if view.mask is not None:
+        return view, View(view.name, image, resized_mask(window.cut(view.mask), size))
+    if factor > survey.factor and max(scaled_size((view.width, view.height), factor)) <= MASK_SIDE_MAX:
+        from .segment.masks import finger_mask  # found again on the working copy, as the whole photo's would be
+
+        mask = finger_mask(image, name=f"view {view.name!r}")
+        return view.with_(mask=window.padded(resized_mask(mask, window.size), fill=False)), View(view.name, image, mask)
+    # working pixel x is photo pixel (x + 0.5) / g - 0.5 + left (g: working over window pixels), and photo pixel x is
+    # survey pixel (x + 0.5) s - 0.5 (s: survey over photo pixels), per axis
+    gx, gy = size[0] / window.width, size[1] / window.height
+    sx, sy = survey.mask.shape[1] / view.width, survey.mask.shape[0] / view.height
+    onto_survey = np.array([[sx / gx, 0.0, sx * (0.5 / gx + window.left) - 0.5],
+                            [0.0, sy / gy, sy * (0.5 / gy + window.top) - 0.5]])
+    mask = cv2.warpAffine(survey.mask.astype(np.float32), onto_survey, size,
+                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
+    photo_mask = window.padded(resized_mask(mask, window.size), fill=False)
+    return view.with_(mask=photo_mask), View(view.name, image, mask)

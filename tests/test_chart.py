@@ -79,3 +79,30 @@ def test_the_vote_s_further_peaks_come_after_its_first(finger):
             apart_sigma = abs(later.d_sigma - earlier.d_sigma) > 2.0 * bin_size * a.step
             assert apart_turn or apart_sigma
     assert chart_shift_candidates(a, b, period, 1) == peaks[:1]
+
+
+def _rod(length: int, width: int = 100, frame=(2000, 400)) -> np.ndarray:
+    """A finger silhouette: a rounded tip at column 100, running ``length`` px to the right (past the frame's edge
+    when longer than it)."""
+    mask = np.zeros((frame[1], frame[0]), bool)
+    rows, cols = np.indices(mask.shape)
+    centre, half = frame[1] // 2, width // 2
+    body = (np.abs(rows - centre) <= half) & (cols >= 100 + half) & (cols < 100 + length)
+    cap = (rows - centre) ** 2 + (cols - (100 + half)) ** 2 <= half ** 2
+    return body | cap
+
+
+def test_only_the_ridge_area_votes_where_most_of_the_finger_in_view_has_no_ridges():
+    from fingersplat3d.align.correspond.chart_shift import RIDGE_VOTE_SHARE, vote_area
+    from fingersplat3d.align.correspond.texture import RIDGE_AREA_WIDTHS
+
+    long = _rod(5000)  # runs out of the frame: 19 widths in view, its ridges within 1.4 of the tip
+    area = vote_area(long)
+    assert area.sum() < RIDGE_VOTE_SHARE * long.sum() and not (area & ~long).any()
+    cols = np.nonzero(area)[1]
+    assert cols.min() == 100 and cols.max() < 100 + (RIDGE_AREA_WIDTHS + 0.2) * 100  # the tip's end
+    short = _rod(220)  # a distal phalanx filling the view: every patch votes, as before
+    assert (vote_area(short) == short).all()
+    no_tip = np.zeros((400, 2000), bool)
+    no_tip[150:250, :] = True  # cut at both ends: no tip to reckon the ridges from
+    assert (vote_area(no_tip) == no_tip).all()

@@ -316,12 +316,12 @@ def test_a_partner_unwrapped_at_another_zoom_votes_for_a_view_photographed_neare
     charts, unwrapped = prepared.charts(capture_frames(prepared.masks))
     config = RegistrationConfig(undecided_peaks=0)
     found = _candidate_shifts(0, 1, prepared, charts, unwrapped, config, voted=True)
-    at_zoom = {zoom: shift for shift, zoom in found}
+    at_zoom = {zoom: shift for shift, zoom, _ in found}
     assert 0.8 in at_zoom, found  # the partner's ridges shrunk as the enlarged view's are grown
     truth = rotation_angle_deg(uwa640.views[1].camera.world_to_cam[:3, :3], uwa640.views[0].camera.world_to_cam[:3, :3])
     assert abs(abs(np.degrees(at_zoom[0.8].turn)) - truth) < 10.0
     same_step = _candidate_shifts(0, 1, prepared, charts, unwrapped, RegistrationConfig(undecided_zooms=()), voted=True)
-    assert not any(shift.decisive for shift, _ in same_step)  # the premise: at the same step the vote is undecided
+    assert not any(shift.decisive for shift, _, _ in same_step)  # the premise: at the same step the vote is undecided
 
 
 @pytest.mark.slow
@@ -422,3 +422,28 @@ def test_views_from_one_place_count_as_one_viewpoint():
     assert distinct_viewpoints(poses, [0, 3]) == 1
     assert distinct_viewpoints(poses, [0, 1, 4]) == 3
     assert distinct_viewpoints(poses, []) == 0
+
+
+def test_a_long_fingers_ridge_area_votes_again_beside_the_whole_fingers_vote(monkeypatch):
+    """Where a view's ridge area is a small part of its finger in view, the undecided pair's candidates are its whole
+    vote's peaks, then its ridge areas' vote's peaks (named so in the record), less those the whole vote gave already;
+    where no view is so, the whole vote's alone."""
+    from types import SimpleNamespace
+
+    import fingersplat3d.align.register as register
+    from fingersplat3d.align.correspond.chart_shift import ChartShift
+
+    whole = ["whole a", "whole b"]
+    ridges = ["ridges a", "whole b"]
+    peaks = {"whole a": [0.50, 1.00], "ridges a": [0.51, 0.20]}  # the ridges' first peak is the whole's first again
+
+    def candidates(a, b, period, count):
+        return [ChartShift(turn, 0.0, 30, 300, 1.0) for turn in peaks[a]]
+
+    monkeypatch.setattr(register, "chart_shift_candidates", candidates)
+    config = RegistrationConfig(undecided_zooms=())
+    prepared = SimpleNamespace(period=10.0, ridge_unwrapped=lambda charts, unwrapped: ridges)
+    found = register._candidate_shifts(0, 1, prepared, None, whole, config, voted=True)
+    assert [(round(s.turn, 2), source) for s, _, source in found] == [(0.5, None), (1.0, None), (0.2, "ridge area")]
+    prepared = SimpleNamespace(period=10.0, ridge_unwrapped=lambda charts, unwrapped: None)
+    assert len(register._candidate_shifts(0, 1, prepared, None, whole, config, voted=True)) == 2

@@ -26,7 +26,7 @@ LAYERS = [
     {"splat"},
     {"synth"},
     {"io", "mesh", "viz"},
-    {"pipeline", "alignment_status", "prints", "working_scale", "unseen_skin"},
+    {"pipeline", "alignment_status", "prints", "working_scale", "working_window", "unseen_skin"},
     {"batch", "experiments"},
     {"cli"},
 ]

@@ -53,7 +53,7 @@ from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, silho
 from .correspond.chart import CylinderChart
 from .correspond.chart_growth import grow_first_guess
 from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, ChartShift, chart_shift_candidates,
-                                     estimate_chart_shift)
+                                     estimate_chart_shift, vote_area)
 from .correspond.contours import contour_correspondences
 from .correspond.epipolar import fundamental_inliers
 from .correspond.guided import GuidedMatches, RidgeMaps, match_guided
@@ -106,6 +106,7 @@ class _Prepared:
     masks: list[np.ndarray]
     grays: list[np.ndarray]
     period: float
+    memo: dict = field(default_factory=dict)  # what is made once on first use (the ridge areas' unwrapped textures)
 
     @cached_property
     def outlines(self) -> list:
@@ -119,6 +120,18 @@ class _Prepared:
         charts = [CylinderChart.from_frame(frame) for frame in frames]
         step = max(1.0, self.period / 8.0)
         return charts, per_item(lambda v: charts[v].unwrap(self.textures[v], self.masks[v], step), range(len(charts)))
+
+    def ridge_unwrapped(self, charts: list[CylinderChart], unwrapped: list) -> list | None:
+        """The textures unwrapped on their ridge areas alone where those are a small part of the finger in view
+        (:func:`~.correspond.chart_shift.vote_area`; the other views as ``unwrapped`` has them), for the vote that comes
+        before the whole fingers' and for its peaks where a pair stays undecided; None when every view votes whole.
+        Made once."""
+        if "ridges" not in self.memo:
+            areas = per_item(vote_area, self.masks)
+            self.memo["ridges"] = None if all((area == mask).all() for area, mask in zip(areas, self.masks)) else [
+                whole if (area == mask).all() else chart.unwrap(texture, area, whole.step)
+                for chart, whole, texture, area, mask in zip(charts, unwrapped, self.textures, areas, self.masks)]
+        return self.memo["ridges"]
 
     @cached_property
     def maps(self) -> list[RidgeMaps]:
@@ -143,7 +156,18 @@ def _verified(matches: GuidedMatches, period: float, config: RegistrationConfig)
 
 
 def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, config: RegistrationConfig, record: dict) -> GuidedMatches:
-    shift = estimate_chart_shift(unwrapped[a], unwrapped[b], prepared.period)
+    """A pair's first guess from the vote of its unwrapped textures: on the ridge areas alone where either view's is a
+    small part of its finger in view (:meth:`_Prepared.ridge_unwrapped`) and that vote is decisive, else on the whole
+    fingers."""
+    shift = None
+    ridges = prepared.ridge_unwrapped(charts, unwrapped)
+    if ridges is not None and (ridges[a] is not unwrapped[a] or ridges[b] is not unwrapped[b]):
+        shift = estimate_chart_shift(ridges[a], ridges[b], prepared.period)
+        if shift is not None and shift.decisive:
+            record["turn_voted_on"] = "ridge area"
+        else:
+            shift = None
+    shift = shift or estimate_chart_shift(unwrapped[a], unwrapped[b], prepared.period)
     if shift is None:
         record["reason"] = "no patch of the unwrapped ridge textures correlates between the views"
         return GuidedMatches.empty()
@@ -523,8 +547,10 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                 say(f"undecided votes: {record['a']}-{record['b']}, their peaks and other zooms")
                 # a pair whose first guess was skipped has not voted yet: its peaks are computed here
                 voted = "turn_ratio" in record or record.get("first_guess_skipped", False)
-                for shift, zoom in _candidate_shifts(a, b, prepared, charts, unwrapped, config, voted):
+                for shift, zoom, source in _candidate_shifts(a, b, prepared, charts, unwrapped, config, voted):
                     entry = {"turn_deg": round(float(np.degrees(shift.turn)), 2), "votes": shift.support}
+                    if source is not None:
+                        entry["voted_on"] = source
                     if zoom != 1.0:
                         entry["zoom"] = round(zoom, 3)
                     record.setdefault("undecided_peaks", []).append(entry)
@@ -622,17 +648,25 @@ def _weak_views_replaced(alignment: GlobalAlignment, agreements: dict, registere
 
 def _candidate_shifts(a: int, b: int, prepared: _Prepared, charts, unwrapped, config: RegistrationConfig,
                       voted: bool) -> list[tuple]:
-    """``(shift, zoom)`` to try for a pair no decisive vote registered: the ``undecided_peaks`` best peaks of its vote
-    (where it voted at all), then, for each of ``undecided_zooms``, b's texture unwrapped at that many times a's step
-    (a photo taken nearer or farther, or zoomed: its ridges a quarter or half again as large or small, which
-    decorrelates the vote's patches) and the vote's best peak where it is decisive."""
-    found = ([(shift, 1.0) for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], prepared.period,
-                                                                config.undecided_peaks)] if voted else [])
+    """``(shift, zoom, what voted: None for the whole fingers)`` to try for a pair no decisive vote registered: the
+    ``undecided_peaks`` best peaks of its vote (where it voted at all), then those of its vote on the ridge areas alone
+    where either view's is a small part of its finger in view (:meth:`_Prepared.ridge_unwrapped`), then, for each of
+    ``undecided_zooms``, b's texture unwrapped at that many times a's step (a photo taken nearer or farther, or zoomed:
+    its ridges a quarter or half again as large or small, which decorrelates the vote's patches) and the vote's best
+    peak where it is decisive."""
+    found = ([(shift, 1.0, None) for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], prepared.period,
+                                                                      config.undecided_peaks)] if voted else [])
+    ridges = prepared.ridge_unwrapped(charts, unwrapped)
+    if voted and ridges is not None and (ridges[a] is not unwrapped[a] or ridges[b] is not unwrapped[b]):
+        near = np.radians(RIVAL_TURN_DEG) / 4  # a peak the whole vote gave already is not tried twice
+        found += [(shift, 1.0, "ridge area") for shift in chart_shift_candidates(ridges[a], ridges[b], prepared.period,
+                                                                                  config.undecided_peaks)
+                  if all(abs(shift.turn - other.turn) > near for other, _, _ in found)]
     for zoom in config.undecided_zooms:
         scaled = charts[b].unwrap(prepared.textures[b], prepared.masks[b], unwrapped[b].step * zoom)
         shift = estimate_chart_shift(unwrapped[a], scaled, prepared.period)
         if shift is not None and shift.decisive:
-            found.append((shift, float(zoom)))
+            found.append((shift, float(zoom), None))
     return found
 
 

@@ -28,7 +28,7 @@ import numpy as np
 from ...device import per_item
 from .chart import MAX_CHART_ANGLE, CylinderChart, Unwrapped
 
-__all__ = ["ChartShift", "estimate_chart_shift", "chart_shift_candidates", "ChartPredictor"]
+__all__ = ["ChartShift", "estimate_chart_shift", "chart_shift_candidates", "ChartPredictor", "vote_area", "RIDGE_VOTE_SHARE"]
 
 MIN_PATCH_NCC = 0.3
 """A patch votes only when its best correlation reaches this."""
@@ -44,6 +44,16 @@ one finger do: kept at 1.3. A view no decisive vote places is tried at its votes
 (``RegistrationConfig.undecided_peaks``), where it must agree far better than that."""
 RIVAL_TURN_DEG = 20.0
 """A rival shift must differ from the peak by this much turn (or by 3 bins of d_sigma)."""
+RIDGE_VOTE_SHARE = 0.4
+"""Where the ridge area (:func:`~fingersplat3d.align.correspond.texture.ridge_area`: the distal phalanx, within 1.4
+finger widths of the tip) is less than this share of the finger in view (:func:`vote_area`), a pair votes first on the
+ridge areas alone, taken when decisive, else on the whole fingers as everywhere; an undecided pair tries both votes'
+peaks, each placed by its agreement through the model (``register._surface_guess``, ``register._candidate_shifts``).
+A phone's photo from far back shows a long finger whose skin behind the ridges (smooth, creased, its look set by the
+light more than by the skin) correlates everywhere a little: its ~2,000 patches outvoted the ridges' 300-600 and put
+a pair 60 degrees apart at -7.5 (phone-like photos, ridge areas 15-24 % of the finger in view; docs/measurements.md,
+stop 89). The rig's views show mostly the distal phalanx (real dev views 47-90 %, the shipped samples 50-66 %, another
+make at the rig's framing 55-65 %): they vote as before."""
 _PATCH_PERIODS = 2.0  # patch half-size in ridge periods (patches are placed every half-size)
 _BIN_PERIODS = 0.45  # histogram bin in ridge periods
 _MAX_SIGMA_SHIFT = 0.27  # search band of d_sigma, as a fraction of the chart radius
@@ -69,6 +79,17 @@ class ChartShift:
     def decisive(self) -> bool:
         """Whether the vote singles out one shift (``MIN_SUPPORT`` votes, ``MIN_RATIO`` above the runner-up)."""
         return self.support >= MIN_SUPPORT and self.ratio >= MIN_RATIO
+
+
+def vote_area(mask: np.ndarray) -> np.ndarray:
+    """The part of a finger mask whose patches vote: its ridge area where that is under :data:`RIDGE_VOTE_SHARE` of
+    it, else the whole mask."""
+    from .texture import ridge_area
+
+    mask = np.asarray(mask, bool)
+    area = ridge_area(mask) & mask
+    total = int(mask.sum())
+    return area if 0 < int(area.sum()) < RIDGE_VOTE_SHARE * total else mask
 
 
 def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.ndarray:

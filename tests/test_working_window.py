@@ -1,0 +1,122 @@
+"""The working window: a large photo whose finger covers little of it is worked on in a window about its centre round
+the finger, and every output comes back on the photo's own grid with the cameras the whole photo gives."""
+import numpy as np
+import pytest
+
+from fingersplat3d.eval import depth_errors, relative_rotation_errors
+from fingersplat3d.pipeline import FuseConfig, fuse
+from fingersplat3d.scene import Camera, Capture, View, look_at
+from fingersplat3d.working_scale import SURVEY_SIDE, working_views
+from fingersplat3d.working_window import WINDOW_MAX_SHARE, WINDOW_MIN_MARGIN_PX, Window, finger_window
+
+
+def _finger(size, box):
+    mask = np.zeros((size[1], size[0]), bool)
+    left, top, right, bottom = box
+    mask[top:bottom, left:right] = True
+    return mask
+
+
+@pytest.mark.parametrize("box", [(1500, 1200, 2600, 1500), (300, 1000, 1900, 1400), (2000, 2300, 3000, 2800)])
+def test_the_window_is_symmetric_about_the_photos_centre_and_holds_the_finger_with_its_margin(box):
+    size = (4032, 3024)
+    window = finger_window(_finger(size, box), size)
+    assert window is not None
+    assert 2 * window.left + window.width == size[0] and 2 * window.top + window.height == size[1]
+    left, top, right, bottom = box
+    margin = WINDOW_MIN_MARGIN_PX
+    assert window.left <= left - margin and window.left + window.width >= right + margin
+    assert window.top <= top - margin and window.top + window.height >= bottom + margin
+    assert window.width * window.height <= WINDOW_MAX_SHARE * size[0] * size[1]
+
+
+def test_no_window_where_it_would_keep_most_of_the_photo_or_there_is_no_finger():
+    size = (4032, 3024)
+    assert finger_window(_finger(size, (200, 400, 3800, 2600)), size) is None  # the finger fills the frame
+    assert finger_window(_finger(size, (0, 600, 2400, 2400)), size) is None  # out of the frame's side, thick
+    assert finger_window(np.zeros((3024, 4032), bool), size) is None
+    # a finger running out of the frame's left side: the window reaches both side borders (it never cuts the finger
+    # where the photo does not), and keeps the rows round it
+    cut = finger_window(_finger(size, (0, 1300, 2400, 1700)), size)
+    assert cut is not None and cut.left == 0 and cut.width == size[0] and cut.height < size[1] / 4
+
+
+def test_a_mask_at_another_resolution_gives_the_photos_window():
+    size = (4032, 3024)
+    whole = finger_window(_finger(size, (1512, 1260, 2520, 1764)), size)
+    survey = finger_window(_finger((1280, 960), (480, 400, 800, 560)), size)  # the same box at 1280/4032
+    assert abs(whole.left - survey.left) <= 4 and abs(whole.top - survey.top) <= 4
+
+
+def test_a_window_cameras_projection_is_the_photos_shifted_by_its_corner():
+    window = Window(1000, 800, 2032, 1424, 4032, 3024)
+    pose = look_at([5.0, -3.0, -100.0], [0, 0, 0], [0, -1, 0])
+    inside = Camera.from_focal(3000.0, 2032, 1424, pose)
+    photo = window.camera_on_photo(inside)
+    assert photo.size == (4032, 3024) and photo.K[0, 2] == pytest.approx(2015.5) and photo.K[1, 2] == pytest.approx(1511.5)
+    points = np.random.default_rng(0).normal(0.0, 5.0, (20, 3))
+    uv_inside, depth_inside = inside.project(points)
+    uv_photo, depth_photo = photo.project(points)
+    np.testing.assert_allclose(uv_photo, uv_inside + [1000, 800], atol=1e-9)
+    np.testing.assert_allclose(depth_photo, depth_inside)
+    with pytest.raises(ValueError):
+        window.camera_on_photo(Camera.from_focal(3000.0, 640, 512, pose))
+    values = np.ones((1424, 2032), np.float32)
+    padded = window.padded(values)
+    assert padded.shape == (3024, 4032) and np.isnan(padded[:800]).all() and (window.cut(padded) == 1).all()
+
+
+def _on_canvas(view: View, size, with_mask: bool) -> View:
+    """The view pasted at the centre of a larger dark canvas: the same camera with a larger frame (its principal
+    point still at the centre), the finger now a small part of the photo."""
+    height, width = view.image.shape[:2]
+    top, left = (size[1] - height) // 2, (size[0] - width) // 2
+    image = np.zeros((size[1], size[0]) + view.image.shape[2:], np.float32)
+    image[top:top + height, left:left + width] = view.image
+    mask = None
+    if with_mask:
+        mask = np.zeros((size[1], size[0]), bool)
+        mask[top:top + height, left:left + width] = view.mask
+    return View(view.name, image, mask)
+
+
+def test_working_views_cut_large_photos_to_their_windows_and_leave_small_ones_whole(uwa640):
+    size = (1920, 1440)
+    assert max(size) > SURVEY_SIDE
+    photos = [_on_canvas(v, size, with_mask=False) for v in uwa640.views]
+    photo, working, scale = working_views(photos, windows=True)
+    assert scale.windowed and len(scale.windows) == 3
+    for p, w, window in zip(photo, working, scale.windows):
+        assert window is not None and (w.width, w.height) == window.size  # the ridges kept at the photo's sampling
+        assert p.mask.shape == (1440, 1920) and not p.mask[~np.pad(np.ones((window.height, window.width), bool),
+                                                              ((window.top,) * 2, (window.left,) * 2))].any()
+        assert w.mask.sum() == pytest.approx(window.cut(p.mask).sum(), rel=0.02)
+    report = scale.as_report([(v.width, v.height) for v in photos])
+    assert report["windows"][0] == scale.windows[0].as_report() and report["sizes"][0] == list(scale.windows[0].size)
+    # photos of the survey's size or smaller, or a windowing not asked for: whole
+    assert not working_views(uwa640.views, windows=True)[2].windowed
+    assert not working_views(photos)[2].windowed
+
+
+def test_a_fuse_in_windows_answers_on_the_photos_grid_with_the_whole_photos_cameras(uwa640):
+    """The sample's views on a canvas three times their area: fused in windows of about a tenth of it, the turns, the
+    focal and the depth are the true ones, on the photos' grid, nothing outside the windows."""
+    size = (1920, 1440)
+    big = Capture(tuple(_on_canvas(v, size, with_mask=True) for v in uwa640.views), uwa640.metadata)
+    result = fuse(big, FuseConfig(splat=None))
+    windows = result.report["working_resolution"]["windows"]
+    assert all(w is not None and w[2] * w[3] < 0.3 * size[0] * size[1] for w in windows)
+    assert result.registered
+    truths = [v.camera.world_to_cam for v in uwa640.views]
+    assert max(relative_rotation_errors([c.world_to_cam for c in result.cameras], truths)) < 2  # measured 0.3 degrees
+    for camera, depth, truth, window in zip(result.cameras, result.depths, uwa640.views, windows):
+        assert camera.size == size and camera.K[0, 2] == pytest.approx((size[0] - 1) / 2)
+        assert camera.K[0, 0] == pytest.approx(truth.camera.K[0, 0], rel=0.1)
+        assert depth.shape == (size[1], size[0])
+        left, top, width, height = window
+        outside = np.ones(depth.shape, bool)
+        outside[top:top + height, left:left + width] = False
+        assert np.isnan(depth[outside]).all()
+        t, l = (size[1] - truth.height) // 2, (size[0] - truth.width) // 2
+        error = depth_errors(depth[t:t + truth.height, l:l + truth.width], truth.depth, truth.mask)
+        assert error.coverage > 0.95 and error.mae < 0.3
