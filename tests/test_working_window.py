@@ -120,3 +120,21 @@ def test_a_fuse_in_windows_answers_on_the_photos_grid_with_the_whole_photos_came
         t, l = (size[1] - truth.height) // 2, (size[0] - truth.width) // 2
         error = depth_errors(depth[t:t + truth.height, l:l + truth.width], truth.depth, truth.mask)
         assert error.coverage > 0.95 and error.mae < 0.3
+
+
+def test_a_photo_too_large_to_segment_again_takes_its_survey_mask_carried_into_the_window(uwa640):
+    """Above MASK_SIDE_MAX the whole photo's working mask is the survey copy's resized; in a window it is the survey
+    copy's carried onto the window's grid, the same outline."""
+    from fingersplat3d.working_scale import MASK_SIDE_MAX
+
+    size = (2800, 2100)
+    assert max(size) > MASK_SIDE_MAX
+    truth = [_on_canvas(v, size, with_mask=True) for v in uwa640.views]
+    photo, working, scale = working_views([View(v.name, v.image) for v in truth], windows=True)
+    window = scale.windows[0]
+    assert window is not None and all(w is window for w in scale.windows)
+    for t, p, w in zip(truth, photo, working):
+        true = window.cut(t.mask)
+        assert w.mask.shape == true.shape
+        assert (w.mask & true).sum() / (w.mask | true).sum() > 0.95  # the survey copy's outline, at 0.46x
+        assert not p.mask[:window.top].any() and (window.cut(p.mask) == w.mask).all()
