@@ -179,14 +179,23 @@ def _photo_period(view: View, survey: _Survey) -> float:
     width, height = min(CROP_SIDE, view.width - left), min(CROP_SIDE, view.height - top)
     if view.mask is not None:
         crop_mask = view.mask[top:top + height, left:left + width]
-    else:  # the survey mask carried up onto the crop only (photo pixel x is survey pixel (x + 0.5) * factor - 0.5)
-        onto_survey = np.array([[factor, 0.0, (left + 0.5) * factor - 0.5], [0.0, factor, (top + 0.5) * factor - 0.5]])
-        crop_mask = cv2.warpAffine(mask.astype(np.float32), onto_survey, (width, height),
-                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
+    else:  # the survey mask carried up onto the crop only
+        crop_mask = _survey_mask_on(mask, (factor, factor), (left, top), (1.0, 1.0), (width, height))
     fine = measure_ridge_period(view.image[top:top + height, left:left + width], crop_mask)
     if fine is not None:
         return fine
     return period / factor if seen else float("nan")
+
+
+def _survey_mask_on(mask: np.ndarray, survey_per_photo: tuple[float, float], corner: tuple[int, int],
+                    grid_per_photo: tuple[float, float], size: tuple[int, int]) -> np.ndarray:
+    """A survey copy's ``mask`` carried onto a grid of ``size`` = (width, height) that covers the photo from its pixel
+    ``corner`` = (left, top) at ``grid_per_photo`` grid pixels per photo pixel (x, y); ``survey_per_photo``: the survey
+    copy's pixels per photo pixel (x, y). Grid pixel x is photo pixel ``(x + 0.5) / g - 0.5 + left``, and photo pixel x
+    is survey pixel ``(x + 0.5) s - 0.5``; linear, cut at one half."""
+    (sx, sy), (left, top), (gx, gy) = survey_per_photo, corner, grid_per_photo
+    onto_survey = np.array([[sx / gx, 0.0, sx * (0.5 / gx + left) - 0.5], [0.0, sy / gy, sy * (0.5 / gy + top) - 0.5]])
+    return cv2.warpAffine(mask.astype(np.float32), onto_survey, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
 
 
 def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> float:
@@ -278,13 +287,7 @@ def _windowed(view: View, survey: _Survey, window: Window, factor: float) -> tup
 
         mask = finger_mask(image, name=f"view {view.name!r}")
         return view.with_(mask=window.padded(resized_mask(mask, window.size), fill=False)), View(view.name, image, mask)
-    # working pixel x is photo pixel (x + 0.5) / g - 0.5 + left (g: working over window pixels), and photo pixel x is
-    # survey pixel (x + 0.5) s - 0.5 (s: survey over photo pixels), per axis
-    gx, gy = size[0] / window.width, size[1] / window.height
-    sx, sy = survey.mask.shape[1] / view.width, survey.mask.shape[0] / view.height
-    onto_survey = np.array([[sx / gx, 0.0, sx * (0.5 / gx + window.left) - 0.5],
-                            [0.0, sy / gy, sy * (0.5 / gy + window.top) - 0.5]])
-    mask = cv2.warpAffine(survey.mask.astype(np.float32), onto_survey, size,
-                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP) > 0.5
+    mask = _survey_mask_on(survey.mask, (survey.mask.shape[1] / view.width, survey.mask.shape[0] / view.height),
+                           (window.left, window.top), (size[0] / window.width, size[1] / window.height), size)
     photo_mask = window.padded(resized_mask(mask, window.size), fill=False)
     return view.with_(mask=photo_mask), View(view.name, image, mask)

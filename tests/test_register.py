@@ -442,8 +442,13 @@ def test_a_long_fingers_ridge_area_votes_again_beside_the_whole_fingers_vote(mon
 
     monkeypatch.setattr(register, "chart_shift_candidates", candidates)
     config = RegistrationConfig(undecided_zooms=())
-    prepared = SimpleNamespace(period=10.0, ridge_unwrapped=lambda charts, unwrapped: ridges)
-    found = register._candidate_shifts(0, 1, prepared, None, whole, config, voted=True)
+    def prepared_with(unwrapped_ridges):  # _Prepared's own ridge_pair on a given ridge_unwrapped
+        prepared = SimpleNamespace(period=10.0, ridge_unwrapped=lambda charts, unwrapped: unwrapped_ridges)
+        prepared.ridge_pair = lambda charts, unwrapped, a, b: register._Prepared.ridge_pair(prepared, charts, unwrapped,
+                                                                                             a, b)
+        return prepared
+
+    found = register._candidate_shifts(0, 1, prepared_with(ridges), None, whole, config, voted=True)
     assert [(round(s.turn, 2), source) for s, _, source in found] == [(0.5, None), (1.0, None), (0.2, "ridge area")]
-    prepared = SimpleNamespace(period=10.0, ridge_unwrapped=lambda charts, unwrapped: None)
-    assert len(register._candidate_shifts(0, 1, prepared, None, whole, config, voted=True)) == 2
+    assert len(register._candidate_shifts(0, 1, prepared_with(None), None, whole, config, voted=True)) == 2
+    assert len(register._candidate_shifts(0, 1, prepared_with(list(whole)), None, whole, config, voted=True)) == 2

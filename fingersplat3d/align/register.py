@@ -128,10 +128,19 @@ class _Prepared:
         Made once."""
         if "ridges" not in self.memo:
             areas = per_item(vote_area, self.masks)
-            self.memo["ridges"] = None if all((area == mask).all() for area, mask in zip(areas, self.masks)) else [
-                whole if (area == mask).all() else chart.unwrap(texture, area, whole.step)
-                for chart, whole, texture, area, mask in zip(charts, unwrapped, self.textures, areas, self.masks)]
+            whole = [(area == mask).all() for area, mask in zip(areas, self.masks)]
+            self.memo["ridges"] = None if all(whole) else [
+                flat if same else chart.unwrap(texture, area, flat.step)
+                for chart, flat, texture, area, same in zip(charts, unwrapped, self.textures, areas, whole)]
         return self.memo["ridges"]
+
+    def ridge_pair(self, charts: list[CylinderChart], unwrapped: list, a: int, b: int) -> tuple | None:
+        """Views ``a`` and ``b`` unwrapped for a vote on their ridge areas (:meth:`ridge_unwrapped`), or None where
+        neither's is a small part of its finger (their vote on the ridges would be the whole fingers')."""
+        ridges = self.ridge_unwrapped(charts, unwrapped)
+        if ridges is None or (ridges[a] is unwrapped[a] and ridges[b] is unwrapped[b]):
+            return None
+        return ridges[a], ridges[b]
 
     @cached_property
     def maps(self) -> list[RidgeMaps]:
@@ -160,9 +169,9 @@ def _surface_guess(prepared: _Prepared, a: int, b: int, charts, unwrapped, confi
     small part of its finger in view (:meth:`_Prepared.ridge_unwrapped`) and that vote is decisive, else on the whole
     fingers."""
     shift = None
-    ridges = prepared.ridge_unwrapped(charts, unwrapped)
-    if ridges is not None and (ridges[a] is not unwrapped[a] or ridges[b] is not unwrapped[b]):
-        shift = estimate_chart_shift(ridges[a], ridges[b], prepared.period)
+    ridges = prepared.ridge_pair(charts, unwrapped, a, b)
+    if ridges is not None:
+        shift = estimate_chart_shift(*ridges, prepared.period)
         if shift is not None and shift.decisive:
             record["turn_voted_on"] = "ridge area"
         else:
@@ -656,10 +665,10 @@ def _candidate_shifts(a: int, b: int, prepared: _Prepared, charts, unwrapped, co
     peak where it is decisive."""
     found = ([(shift, 1.0, None) for shift in chart_shift_candidates(unwrapped[a], unwrapped[b], prepared.period,
                                                                       config.undecided_peaks)] if voted else [])
-    ridges = prepared.ridge_unwrapped(charts, unwrapped)
-    if voted and ridges is not None and (ridges[a] is not unwrapped[a] or ridges[b] is not unwrapped[b]):
+    ridges = prepared.ridge_pair(charts, unwrapped, a, b) if voted else None
+    if ridges is not None:
         near = np.radians(RIVAL_TURN_DEG) / 4  # a peak the whole vote gave already is not tried twice
-        found += [(shift, 1.0, "ridge area") for shift in chart_shift_candidates(ridges[a], ridges[b], prepared.period,
+        found += [(shift, 1.0, "ridge area") for shift in chart_shift_candidates(*ridges, prepared.period,
                                                                                   config.undecided_peaks)
                   if all(abs(shift.turn - other.turn) > near for other, _, _ in found)]
     for zoom in config.undecided_zooms:

@@ -109,8 +109,8 @@ def axis_coordinates(u: np.ndarray, v: np.ndarray, axis: np.ndarray, origin: np.
 
 def outline_swell(mask: np.ndarray) -> float | None:
     """The widest chord across the finger's axis over the median one, over the chords the image border does not cut
-    (:func:`raw_chords` along :func:`finger_axis`); None when fewer than half of them are whole. A finger narrows toward its tip and
-    widens a little toward its base; a patch of something else joined to it makes one stretch much wider
+    (:func:`raw_chords` along :func:`finger_axis`); None when fewer than half of them are whole. A finger narrows
+    toward its tip and widens a little toward its base; a patch of something else joined to it makes one stretch much wider
     (:data:`OUTLINE_SWELL`)."""
     mask = np.asarray(mask, bool)
     if mask.sum() < 64:
