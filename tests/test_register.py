@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.align.register import RegistrationConfig, register_views, weak_view
+from fingersplat3d.align.register import RegistrationConfig, peak_places, register_views, weak_view
 from fingersplat3d.eval import relative_rotation_errors
 from fingersplat3d.eval.poses import rotation_angle_deg
 from fingersplat3d.pointmaps import get_backend
@@ -380,6 +380,25 @@ def test_the_one_view_agreeing_far_below_the_best_pair_is_the_weak_view():
     assert weak_view({(0, 1): 0.585, (0, 2): 0.31, (1, 2): 0.146}, share, root=0)[0] is None
     assert weak_view({(0, 1): 0.1, (0, 2): 0.1, (1, 2): 0.1, (2, 3): 0.9}, share, root=2)[0] is None  # two weak views
     assert weak_view({}, share, root=0)[0] is None
+
+
+def test_a_peak_places_a_view_above_the_agreement_or_at_the_captures_own_level_above_the_floor():
+    """At 0.25 or more a peak places its view without the capture's level being read; under it, only at the floor or
+    above and near the level of the pairs already registered; never against a rival peak that agrees nearly as well."""
+    config = RegistrationConfig()
+    asked = []
+
+    def level(value):
+        return lambda: asked.append(value) or value
+
+    assert peak_places(0.40, 0.1, level(0.9), config) and not asked  # the level not read
+    assert not peak_places(0.40, 0.3, level(0.9), config)  # a rival at 0.3: not 1.5 times better
+    # A long finger whose registered pair agrees at 0.236 (phone-like photos, ridges on a fifth of it).
+    assert peak_places(0.237, 0.048, level(0.236), config)
+    assert not peak_places(0.237, 0.048, level(0.5), config)  # far below a capture whose pairs agree well
+    asked.clear()
+    assert not peak_places(0.18, 0.0, level(0.15), config) and not asked  # a mirrored view's 0.18: under the floor
+    assert not peak_places(0.237, 0.048, level(0.236), RegistrationConfig(undecided_share=2.0))
 
 
 @pytest.mark.slow  # 10 s

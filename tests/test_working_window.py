@@ -7,7 +7,7 @@ from fingersplat3d.eval import depth_errors, relative_rotation_errors
 from fingersplat3d.pipeline import FuseConfig, fuse
 from fingersplat3d.scene import Camera, Capture, View, look_at
 from fingersplat3d.working_scale import SURVEY_SIDE, working_views
-from fingersplat3d.working_window import WINDOW_MAX_SHARE, WINDOW_MIN_MARGIN_PX, Window, finger_window
+from fingersplat3d.working_window import WINDOW_MAX_SHARE, WINDOW_MIN_MARGIN_PX, Window, box_window, finger_window
 
 
 def _finger(size, box):
@@ -46,6 +46,35 @@ def test_a_mask_at_another_resolution_gives_the_photos_window():
     whole = finger_window(_finger(size, (1512, 1260, 2520, 1764)), size)
     survey = finger_window(_finger((1280, 960), (480, 400, 800, 560)), size)  # the same box at 1280/4032
     assert abs(whole.left - survey.left) <= 4 and abs(whole.top - survey.top) <= 4
+
+
+@pytest.mark.parametrize("box", [(1500, 1200, 2600, 1500), (300, 1000, 1900, 1400), (0, 1300, 2400, 1700)])
+def test_the_box_window_holds_the_finger_with_its_margin_and_no_more(box):
+    """For the splat fit: round the finger's own box, as small as the margin allows wherever the finger lies."""
+    size = (4032, 3024)
+    mask = _finger(size, box)
+    window, about_centre = box_window(mask, size), finger_window(mask, size)
+    left, top, right, bottom = box
+    margin = max(WINDOW_MIN_MARGIN_PX, 0.25 * min(right - left, bottom - top))
+    assert window.left == max(0, int(np.floor(left - margin))) and window.top == max(0, int(np.floor(top - margin)))
+    assert window.left + window.width == min(size[0], int(np.ceil(right + margin)))
+    assert window.top + window.height == min(size[1], int(np.ceil(bottom + margin)))
+    assert window.width * window.height <= about_centre.width * about_centre.height
+    assert box_window(_finger(size, (200, 400, 3800, 2600)), size) is None  # the finger fills the frame
+    assert box_window(np.zeros((3024, 4032), bool), size) is None
+
+
+def test_a_camera_carried_into_a_window_and_back_is_the_same_camera():
+    window = Window(700, 1100, 1500, 600, 4032, 3024)  # off the photo's centre
+    pose = look_at([5.0, -3.0, -100.0], [0, 0, 0], [0, -1, 0])
+    photo = Camera.from_focal(3000.0, 4032, 3024, pose)
+    inside = window.camera_in_window(photo)
+    assert inside.size == (1500, 600) and inside.K[0, 2] == pytest.approx(photo.K[0, 2] - 700)
+    back = window.camera_on_photo(inside)
+    np.testing.assert_allclose(back.K, photo.K)
+    np.testing.assert_allclose(back.world_to_cam, photo.world_to_cam)
+    with pytest.raises(ValueError):
+        window.camera_in_window(Camera.from_focal(3000.0, 640, 512, pose))
 
 
 def test_a_window_cameras_projection_is_the_photos_shifted_by_its_corner():
@@ -138,3 +167,31 @@ def test_a_photo_too_large_to_segment_again_takes_its_survey_mask_carried_into_t
         assert w.mask.shape == true.shape
         assert (w.mask & true).sum() / (w.mask | true).sum() > 0.95  # the survey copy's outline, at 0.46x
         assert not p.mask[:window.top].any() and (window.cut(p.mask) == w.mask).all()
+
+
+def test_the_splat_fit_works_in_each_fingers_own_box_with_the_geometrys_cameras(uwa640):
+    """The splat fit takes the cameras as given, so it works in each finger's box rather than the geometry's window
+    about the photo's centre: its cameras come back on the photo's grid as the geometry's, its depths nothing outside
+    the box, and the photos fitted as well as in the geometry's windows."""
+    from fingersplat3d.splat.config import SplatConfig
+
+    size = (1920, 1440)
+    big = Capture(tuple(_on_canvas(v, size, with_mask=True) for v in uwa640.views), uwa640.metadata)
+    splat = SplatConfig(iterations=20, densify_from=1000)
+    result = fuse(big, FuseConfig(splat=splat))
+    windows = result.report["working_resolution"]["windows"]
+    boxes = result.report["working_resolution"]["splat"]["windows"]
+    for (left, top, width, height), (l, t, w, h) in zip(windows, boxes):
+        assert left <= l and top <= t and l + w <= left + width and t + h <= top + height
+    assert sum(w * h for _, _, w, h in boxes) < sum(w * h for _, _, w, h in windows)
+    for camera, focal in zip(result.cameras, result.report["alignment"]["focals_px"]):  # the geometry's, as fitted
+        assert camera.size == size and camera.K[0, 2] == pytest.approx((size[0] - 1) / 2)
+        assert camera.K[1, 2] == pytest.approx((size[1] - 1) / 2) and camera.K[0, 0] == pytest.approx(focal, rel=1e-6)
+    truths = [v.camera.world_to_cam for v in uwa640.views]
+    assert max(relative_rotation_errors([c.world_to_cam for c in result.cameras], truths)) < 2
+    for depth, (l, t, w, h) in zip(result.splat_depths, boxes):
+        assert depth.shape == (size[1], size[0])
+        outside = np.ones(depth.shape, bool)
+        outside[t:t + h, l:l + w] = False
+        assert np.isnan(depth[outside]).all() and np.isfinite(depth[~outside]).mean() > 0.05
+    assert min(result.report["splat"]["psnr_in_mask_db"].values()) > 25

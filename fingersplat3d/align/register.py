@@ -528,7 +528,8 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
                          prepared: _Prepared, charts, unwrapped, pointmaps, align, config: RegistrationConfig,
                          rng, say) -> GlobalAlignment:
     """The alignment with the views no decisive vote placed placed, where they can be, by agreement through the model
-    (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``); ``registered`` grows by the pairs that place them.
+    (``RegistrationConfig.undecided_peaks``, ``undecided_zooms``, ``undecided_floor``); ``registered`` grows by the
+    pairs that place them.
     ``say``: told each pair and turn tried (a capture that will not register spends 20-40 s here at 1280x1024)."""
     import torch
 
@@ -539,6 +540,16 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
     # A peak's first guess is grown and verified from fewer matches: the agreement through the model decides.
     trying = replace(config, min_matches=min(config.min_matches, config.undecided_min_matches))
     done = set()  # pairs tried: a view placed here can reach further views on the next pass
+    known: list = [None, 0.0]  # the model the capture's level was read through, and the level
+
+    def level() -> float:
+        """The best agreement of the pairs registered so far, through the model in hand (read once per model)."""
+        if known[0] is not alignment:
+            held = {(p.a, p.b) for p in registered if alignment.aligned[p.a] and alignment.aligned[p.b]}
+            known[:] = [alignment, max((_through_model(prepared, alignment, a, b, config)[2] for a, b in sorted(held)),
+                                       default=0.0)]
+        return known[1]
+
     placing = True
     while placing:
         placing = False
@@ -594,14 +605,28 @@ def _placed_by_agreement(alignment: GlobalAlignment, registered: list[PairCorres
             runner_up = max((agreement for agreement, _, _, trial, _ in tried[1:]
                              if float(torch.rad2deg(rotation_angle(turn(trial), turn(best[3])))) > RIVAL_TURN_DEG),
                             default=0.0)
-            if best[0] >= config.undecided_agreement and best[0] >= config.undecided_margin * runner_up:
+            if peak_places(best[0], runner_up, level, config):
                 registered.append(best[2])
                 alignment = best[3]
                 records[best[1]].update(ok=True, reason="", placed_by_agreement=round(best[0], 3))
+                if best[0] < config.undecided_agreement:  # placed by the capture's own level
+                    records[best[1]]["registered_agreement"] = round(known[1], 3)
                 if best[4] != 1.0:
                     records[best[1]]["placed_at_zoom"] = round(best[4], 3)
                 placing = True
     return alignment
+
+
+def peak_places(agreement: float, runner_up: float, level: Callable[[], float], config: RegistrationConfig) -> bool:
+    """Whether a view no decisive vote placed is placed by the peak whose views agree best through the model
+    (``agreement``): ``undecided_margin`` times the best peak turning it elsewhere (``runner_up``), and at least
+    ``undecided_agreement``, or at least ``undecided_floor`` and ``undecided_share`` of the capture's level (``level()``:
+    its registered pairs' best agreement, read only when asked)."""
+    if agreement < config.undecided_margin * runner_up:
+        return False
+    if agreement >= config.undecided_agreement:
+        return True
+    return agreement >= config.undecided_floor and agreement >= config.undecided_share * level()
 
 
 def weak_view(agreements: dict[tuple[int, int], float], share: float, root: int) -> tuple[int | None, float]:

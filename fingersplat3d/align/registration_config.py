@@ -138,6 +138,15 @@ class RegistrationConfig:
     """The agreement through the model a peak must reach to place a view no decisive vote placed: twice
     ``min_agreement``, above a mirrored view's 0.18 (one finger's views at full contrast: 0.27-0.86 on the real
     front-side pairs)."""
+    undecided_floor: float = 0.2
+    """Below ``undecided_agreement``, a peak still places the view when it agrees at least this much and at least
+    ``undecided_share`` of the best agreement of the capture's registered pairs (through the model in hand): a capture
+    whose every pair agrees low, as views of one finger, is judged by its own level. Above a mirrored view's 0.18 and
+    another finger's 0.14 at most. Measured: phone-like photos of a long finger whose ridges cover a fifth of it in
+    view (the rest skin that matches little), its registered pair agreeing at 0.236 and the third view's right peak
+    at 0.237: placed, where at 0.25 alone it was left unregistered (docs/measurements.md)."""
+    undecided_share: float = 0.9
+    """See ``undecided_floor``."""
     undecided_margin: float = 1.5
     """How many times better than any peak turning the view elsewhere the placing peak must agree."""
     weak_agreement_share: float = 0.35
