@@ -14,8 +14,8 @@ reach from the centre allows. It extends to the photo's border on a side where t
 window never cuts the finger where the photo does not.
 
 The splat fit takes the cameras as the geometry found them, so it needs no principal point at its window's centre: it
-works in each finger's own box and margin (:func:`box_window`), a third of the pixels of a window about the centre for a
-long finger in a phone's photo (docs/measurements.md, stop 90).
+works in each finger's own box and margin (:func:`box_window`): 55 % of the pixels of a window about the centre for a
+long finger in a phone's photo, the fit in half the time (docs/measurements.md, stop 90).
 
 Only photos larger than :data:`~fingersplat3d.working_scale.SURVEY_SIDE` whose window would keep at most
 :data:`WINDOW_MAX_SHARE` of them are windowed: the geometry of a smaller photo costs seconds, and every capture the
