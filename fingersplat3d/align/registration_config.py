@@ -141,10 +141,11 @@ class RegistrationConfig:
     undecided_floor: float = 0.2
     """Below ``undecided_agreement``, a peak still places the view when it agrees at least this much and at least
     ``undecided_share`` of the best agreement of the capture's registered pairs (through the model in hand): a capture
-    whose every pair agrees low, as views of one finger, is judged by its own level. Above a mirrored view's 0.18 and
-    another finger's 0.14 at most. Measured: phone-like photos of a long finger whose ridges cover a fifth of it in
-    view (the rest skin that matches little), its registered pair agreeing at 0.236 and the third view's right peak
-    at 0.237: placed, where at 0.25 alone it was left unregistered (docs/measurements.md)."""
+    whose every pair agrees low, as views of one finger, is judged by its own level. Just above a mirrored real view's
+    0.196 at most (the level holds those) and above another finger's 0.14. Measured: phone-like photos of a long finger whose ridges cover a fifth of it in
+    view (the rest skin that matches little), its registered pair agreeing at 0.228 and the third view's right peak
+    at 0.234: placed, where at 0.25 alone it was left unregistered; mirrored real side views at most 0.27 of their
+    capture's level (docs/measurements.md)."""
     undecided_share: float = 0.9
     """See ``undecided_floor``."""
     undecided_margin: float = 1.5
