@@ -293,8 +293,8 @@ def _splat_windows(photos: Capture, scale: WorkingScale) -> tuple:
 
     if not scale.windowed:
         return scale.windows
-    return tuple(window if window is None else box_window(view.mask, (view.width, view.height)) or window
-                 for window, view in zip((scale.window(v) for v in range(len(photos))), photos.views))
+    return tuple(None if scale.window(v) is None else box_window(view.mask, (view.width, view.height)) or scale.window(v)
+                 for v, view in enumerate(photos.views))
 
 
 def _backend(config: FuseConfig):
