@@ -18,7 +18,8 @@ def test_install_script_pins_the_cpu_torch_build():
 
 # The layers of docs/architecture.md, lowest first: a module imports only from its own layer or below.
 LAYERS = [
-    {"errors", "rotations", "robust", "sampling", "ssim", "scene", "device", "heap", "atomic", "__init__"},
+    {"errors", "rotations", "robust", "sampling", "ssim", "structure_tensor", "scene", "device", "heap", "atomic",
+     "__init__"},
     {"segment", "geometry"},
     {"pointmaps"},
     {"align"},

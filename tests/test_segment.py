@@ -306,3 +306,54 @@ def test_a_hazy_dark_background_is_found_by_brightness():
     # Haze over no finger at all is still no finger.
     blank = np.full_like(hazy, 0.45 * skin) + np.random.default_rng(0).normal(0, 0.003, hazy.shape).astype(np.float32)
     raises_naming("v", finger_mask, blank, name="v")
+
+
+def test_ridges_repeat_where_a_line_or_an_edge_does_not():
+    """Asked to repeat a period across their own direction, ridges score and the edges of other things do not: a
+    grating of the searched period scores high, a sharp line or the step of a plain object's edge (as periodic as
+    ridges by the bands' measure, and scored so by the plain score) scores nothing."""
+    from fingersplat3d.segment.any_background import REPEAT_GATE, RIDGE_LEVEL, repetition, ridge_score
+
+    period = 6.5
+    rows, cols = np.mgrid[0:200, 0:300].astype(np.float32)
+    image = np.full((200, 300), 0.5, np.float32)
+    grating = (cols < 120) & (rows > 40) & (rows < 160)
+    image[grating] += 0.2 * np.cos(2 * np.pi * (0.8 * cols + 0.6 * rows)[grating] / period)
+    image[(np.abs(cols - 0.3 * rows - 170) < 1.0) & (rows > 30) & (rows < 170)] = 0.9  # a thin line, in focus
+    image[(cols > 230) & (rows > 60) & (rows < 140)] = 0.15  # a plain dark object's edges
+    image = cv2.GaussianBlur(image, (0, 0), 0.7)
+    inner = cv2.erode(grating.astype(np.uint8), np.ones((21, 21), np.uint8)).astype(bool)
+    line, edge = (cols >= 135) & (cols < 225), cols >= 225
+    plain, repeated = ridge_score(image, period), ridge_score(image, period, repeated=True)
+    assert plain[line].max() > RIDGE_LEVEL and plain[edge].max() > RIDGE_LEVEL  # measured 0.34 and 0.27
+    assert np.median(repeated[inner]) > 2 * RIDGE_LEVEL
+    assert repeated[line | edge].max() < RIDGE_LEVEL
+    band = cv2.GaussianBlur(image, (0, 0), 0.15 * period) - cv2.GaussianBlur(image, (0, 0), 0.45 * period)
+    energy = cv2.GaussianBlur(band * band, (0, 0), period)
+    repeats = repetition(band, energy, period)
+    assert np.median(repeats[inner]) > 0.5
+    strong = (line | edge) & (energy > 0.1 * energy[inner].mean())
+    assert strong.any() and np.percentile(repeats[strong], 95) < REPEAT_GATE[0]
+    for blank in (np.zeros((50, 60), np.float32), np.ones((50, 60), np.float32)):
+        assert np.isfinite(ridge_score(blank, period, repeated=True)).all()
+
+
+def test_the_mask_of_repeating_ridges_is_taken_where_the_plain_one_found_something_else():
+    """Of the two cuts, the plain one stays unless the other holds half as many repeating ridges again (the plain one
+    found a thing whose edges read as ridges) or the plain one swells past the finger where the other does not."""
+    from fingersplat3d.segment.any_background import REPEATED_MORE, _chosen
+
+    rows, cols = np.mgrid[0:240, 0:320]
+    finger = (np.abs(rows - 120) < 40) & (cols > 60)
+    ridged = np.zeros((240, 320), np.float32)
+    ridged[finger & (cols < 200)] = 0.5  # repeating ridges on the pad
+    other = (np.hypot(rows - 60, cols - 40) < 35)  # a blob with no repeating ridges
+    assert _chosen(other, finger, ridged) is finger  # the plain cut took the blob
+    assert _chosen(finger, finger.copy(), ridged) is finger  # the same finger: the plain cut stays
+    swollen = finger | ((np.abs(cols - 250) < 30) & (rows > 20))  # something of the skin's colour joined to it
+    assert _chosen(swollen, finger, ridged) is finger
+    assert _chosen(finger, swollen, ridged) is finger
+    assert _chosen(None, finger, ridged) is finger and _chosen(finger, None, ridged) is finger
+    assert _chosen(None, None, ridged) is None
+    part = finger & (cols < 130)  # a cut holding a share of the ridges only
+    assert _chosen(part, finger, ridged) is finger and REPEATED_MORE > 1.0

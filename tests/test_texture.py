@@ -54,7 +54,7 @@ def test_band_pass_has_unit_rms_inside_nothing_outside_and_no_edge_halo():
 def test_structure_products_point_across_straight_ridges(angle_deg):
     """Straight ridges: the structure tensor's main axis runs across them and is one-directional (coherence ~1);
     over a mask, the flat grey outside does not dilute the tensor at the rim."""
-    from fingersplat3d.align.correspond.texture import structure_products
+    from fingersplat3d.structure_tensor import structure_products
 
     v, u = np.mgrid[0:120, 0:140].astype(np.float64)
     across = np.array([np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))])

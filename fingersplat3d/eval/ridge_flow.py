@@ -18,7 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..align.correspond.texture import structure_products
+from ..structure_tensor import ridge_direction
 
 __all__ = ["smooth_flow", "resample", "across_ridges", "ncc", "flow_residual"]
 
@@ -50,10 +50,7 @@ def resample(texture: np.ndarray, flow: np.ndarray) -> np.ndarray:
 def across_ridges(texture: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """``(direction [H, W, 2], coherence [H, W])``: the unit vector across the ridges (the structure tensor's main
     axis over 1.5 periods) and how one-directional the texture is there (0 to 1)."""
-    uu, uv, vv = np.moveaxis(structure_products(np.asarray(texture, np.float64), 1.5 * period), -1, 0)
-    angle = 0.5 * np.arctan2(2.0 * uv, uu - vv)
-    coherence = np.hypot(uu - vv, 2.0 * uv) / np.maximum(uu + vv, 1e-30)
-    return np.stack([np.cos(angle), np.sin(angle)], -1), coherence
+    return ridge_direction(np.asarray(texture, np.float64), 1.5 * period)
 
 
 def ncc(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..align.correspond.texture import masked_blur, structure_products
+from ..structure_tensor import masked_blur, structure_products
 
 __all__ = ["gabor_enhance", "ridge_coherence", "ORIENTATIONS", "SIGMA_ACROSS", "SIGMA_ALONG", "ORIENTATION_PERIODS"]
 

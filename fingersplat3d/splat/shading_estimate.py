@@ -21,7 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..align.correspond.texture import as_gray, masked_blur
+from ..align.correspond.texture import as_gray
+from ..structure_tensor import masked_blur
 from ..robust import robust_sigma
 from ..sampling import sample_nearest
 from ..scene import Camera

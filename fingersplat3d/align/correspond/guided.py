@@ -32,7 +32,7 @@ import numpy as np
 
 from ...device import cpu_threads, per_item
 from ...segment.morphology import eroded
-from .texture import structure_products
+from ...structure_tensor import structure_products
 
 __all__ = ["GuidedMatches", "Predictor", "RidgeMaps", "predict_with_curvature", "predict_with_jacobian", "match_guided",
            "structure_information"]

@@ -20,8 +20,9 @@ import numpy as np
 from ...errors import InputError
 from ...robust import robust_sigma
 from ...segment.morphology import dilated, disc, eroded
+from ...structure_tensor import masked_blur
 
-__all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "masked_blur", "ridge_texture", "structure_products",
+__all__ = ["as_gray", "estimate_ridge_period", "measure_ridge_period", "ridge_area", "suppress_glints", "ridge_texture",
            "DEFAULT_PERIOD_PX", "MIN_RIDGES_ACROSS", "no_ridges"]
 
 DEFAULT_PERIOD_PX = 8.0
@@ -197,24 +198,6 @@ def suppress_glints(gray: np.ndarray, mask: np.ndarray, radius: int = 1, factor:
     inner = eroded(mask, radius, iterations=2)  # the outline's step is no glint
     glint = dilated((top_hat > factor * np.maximum(local, noise)) & inner, radius)
     return np.where(glint, opened, gray)
-
-
-def masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian blur of ``values`` over ``weight`` (a mask as float), normalised by the blurred weight: the mean of
-    what lies inside, so the outside does not darken the rim."""
-    return cv2.GaussianBlur(values * weight, (0, 0), sigma) / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigma), 1e-3)
-
-
-def structure_products(texture: np.ndarray, sigma: float, weight: np.ndarray | None = None) -> np.ndarray:
-    """``[H, W, 3]`` the structure tensor of ``texture`` (in its own float type): the products ``(uu, uv, vv)`` of its
-    central-difference gradients, each averaged by a Gaussian of ``sigma`` pixels, over ``weight`` (a mask as float:
-    :func:`masked_blur`) where given. The one home of the ridges' local direction: guided matching's information
-    matrices, the warp check's direction across the ridges and the prints' Gabor orientations read it."""
-    grad_v, grad_u = np.gradient(texture)
-    products = (grad_u * grad_u, grad_u * grad_v, grad_v * grad_v)
-    if weight is None:
-        return np.stack([cv2.GaussianBlur(product, (0, 0), sigma) for product in products], -1)
-    return np.stack([masked_blur(product, weight, sigma) for product in products], -1)
 
 
 def ridge_texture(gray: np.ndarray, mask: np.ndarray, period: float) -> np.ndarray:
