@@ -24,9 +24,9 @@ one period and a slowly turning orientation. So:
 6. steps 2-5 again with a ridge score that also asks the texture to repeat itself a period across its own direction
    (:func:`repetition`: an object's edge or an in-focus line is one crest or one step, and had read as ridges), down
    to ridges finer than the working copy shows (:data:`FINE_PERIODS_PX`, on the photo enlarged); that cut is taken
-   where it holds half as many repeating ridges again as the first, or where the first swells past the finger and it
-   does not (:func:`_chosen`): the first had found a thing of the clutter, or taken one in. A real finger's skin, its
-   ridges among pores and noise, repeats little at the working size, so the first cut stays wherever the two agree;
+   where it holds half as many repeating ridges again as the first, or where the first swells past the finger a tenth
+   more than it (:func:`_chosen`): the first had found a thing of the clutter, or taken one in. A real finger's skin,
+   its ridges among pores and noise, repeats little at the working size, so the first cut stays wherever both agree;
 7. back to full size with a smooth edge;
 8. the outline moved onto the photo's edge at full size, to a fraction of a pixel (:func:`_on_the_edge`).
 
@@ -325,8 +325,9 @@ def _refined(colour8: np.ndarray, piece: np.ndarray, evidence: np.ndarray, perio
              ring_width: int, reach_share: float = RIDGE_REACH_SHARE) -> np.ndarray:
     """A last GrabCut, now told what the finger is (its ridged area) and what it is not (everything outside the
     piece): background stuff that went along with the finger (it was not in the border ring) falls away. Skin-coloured
-    pixels of the piece farther than ``reach_share`` of its width from any ridge start as probable background: a grey thing the finger touches is as near the skin's colour as its shaded flank, but shows no ridges
-    (what GrabCut learned of the finger's colours from it had kept it whole)."""
+    pixels of the piece farther than ``reach_share`` of its width from any ridge start as probable background: a grey
+    thing the finger touches is as near the skin's colour as its shaded flank, but shows no ridges (what GrabCut
+    learned of the finger's colours from it had kept it whole)."""
     ridged = _piece_pad(piece, evidence, period, colour8)
     if ridged is None:
         return piece
@@ -386,9 +387,8 @@ def _on_the_edge(colour: np.ndarray, mask: np.ndarray, reach: float) -> np.ndarr
 
 def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: float) -> np.ndarray:
     """The finger's mask at the working size from its ridge ``evidence`` and their ``period`` (steps 2-4 of the
-    module docstring);
-    ``work``: the working copy's gray, colour, 8-bit colour, border ring and its width. An InputError (naming
-    nothing: the caller adds the image's name) where no piece shows ridges."""
+    module docstring); ``work``: the working copy's gray, colour, 8-bit colour, border ring and its width. An
+    InputError (naming nothing: the caller adds the image's name) where no piece shows ridges."""
     gray, colour, colour8, ring, ring_width = work
     pad = _pad(evidence)
     pad = _sure_finger(pad, period, colour) if pad is not None else None
@@ -438,6 +438,19 @@ def _chosen(plain: np.ndarray | None, again: np.ndarray | None, repeated: np.nda
     return plain
 
 
+def _may_be_bettered(plain: np.ndarray | None, repeated: np.ndarray) -> bool:
+    """Whether :func:`_chosen` could take another cut over ``plain``: where no cut can hold :data:`REPEATED_MORE` times
+    its repeating ridges (it holds that share of the image's already) and its swell is within :data:`SWELL_MARGIN`
+    (no other's is under 1), the second cut is not made."""
+    if plain is None:
+        return True
+    ridged = repeated > RIDGE_LEVEL
+    if REPEATED_MORE * np.count_nonzero(ridged & plain) < np.count_nonzero(ridged):
+        return True
+    swell = outline_swell(plain)
+    return swell is not None and swell > SWELL_MARGIN
+
+
 def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     """The finger's silhouette ``[H, W]`` bool in ``image`` (``[H, W]`` or ``[H, W, 3]`` float in [0, 1]) on any
     background (see the module docstring)."""
@@ -459,14 +472,17 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     work = (gray, colour, colour8, ring, ring_width)
     photo_gray = _gray(np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)) if factor < 1.0 else None
     repeated = _ridge_evidence(gray, photo_gray, repeated=True)
-    found, problem = [], None
-    for evidence, reach in ((_ridge_evidence(gray), RIDGE_REACH_SHARE), (repeated, REPEATED_REACH_SHARE)):
+    try:
+        plain, problem = fill_holes(_to_border(_cut(work, *_ridge_evidence(gray), RIDGE_REACH_SHARE), ring_width)), None
+    except InputError as error:
+        plain, problem = None, error
+    again = None
+    if _may_be_bettered(plain, repeated[0]):
         try:
-            found.append(fill_holes(_to_border(_cut(work, *evidence, reach), ring_width)))
+            again = fill_holes(_to_border(_cut(work, *repeated, REPEATED_REACH_SHARE), ring_width))
         except InputError as error:
-            found.append(None)
             problem = problem or error
-    finger = _chosen(*found, repeated[0])
+    finger = _chosen(plain, again, repeated[0])
     if finger is None:
         raise InputError(f"{name}: {problem}")
     if factor < 1.0:  # back to full size with a smooth edge
