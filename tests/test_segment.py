@@ -341,7 +341,7 @@ def test_ridges_repeat_where_a_line_or_an_edge_does_not():
 def test_the_mask_of_repeating_ridges_is_taken_where_the_plain_one_found_something_else():
     """Of the two cuts, the plain one stays unless the other holds half as many repeating ridges again (the plain one
     found a thing whose edges read as ridges) or the plain one swells past the finger where the other does not."""
-    from fingersplat3d.segment.any_background import REPEATED_MORE, _chosen
+    from fingersplat3d.segment.any_background import REPEATED_MORE, _chosen, _may_be_bettered
 
     rows, cols = np.mgrid[0:240, 0:320]
     finger = (np.abs(rows - 120) < 40) & (cols > 60)
@@ -357,3 +357,7 @@ def test_the_mask_of_repeating_ridges_is_taken_where_the_plain_one_found_somethi
     assert _chosen(None, None, ridged) is None
     part = finger & (cols < 130)  # a cut holding a share of the ridges only
     assert _chosen(part, finger, ridged) is finger and REPEATED_MORE > 1.0
+    # the second cut is made only where it could be taken
+    assert not _may_be_bettered(finger, ridged)
+    assert _may_be_bettered(None, ridged) and _may_be_bettered(other, ridged) and _may_be_bettered(part, ridged)
+    assert _may_be_bettered(swollen, ridged)
