@@ -340,24 +340,36 @@ def test_ridges_repeat_where_a_line_or_an_edge_does_not():
 
 def test_the_mask_of_repeating_ridges_is_taken_where_the_plain_one_found_something_else():
     """Of the two cuts, the plain one stays unless the other holds half as many repeating ridges again (the plain one
-    found a thing whose edges read as ridges) or the plain one swells past the finger where the other does not."""
-    from fingersplat3d.segment.any_background import REPEATED_MORE, _chosen, _may_be_bettered
+    found a thing whose edges read as ridges) or the plain one swells past the finger where the other does not; the
+    other is cut only where it could be taken."""
+    from fingersplat3d.segment.any_background import REPEATED_MORE, _chosen
 
     rows, cols = np.mgrid[0:240, 0:320]
     finger = (np.abs(rows - 120) < 40) & (cols > 60)
     ridged = np.zeros((240, 320), np.float32)
     ridged[finger & (cols < 200)] = 0.5  # repeating ridges on the pad
     other = (np.hypot(rows - 60, cols - 40) < 35)  # a blob with no repeating ridges
-    assert _chosen(other, finger, ridged) is finger  # the plain cut took the blob
-    assert _chosen(finger, finger.copy(), ridged) is finger  # the same finger: the plain cut stays
+    cuts = []
+
+    def cut(mask):
+        def again():
+            cuts.append(mask)
+            return mask
+        return again
+
+    assert _chosen(other, cut(finger), ridged) is finger  # the plain cut took the blob
+    assert _chosen(finger, cut(finger.copy()), ridged) is finger  # the same finger: the plain cut stays
     swollen = finger | ((np.abs(cols - 250) < 30) & (rows > 20))  # something of the skin's colour joined to it
-    assert _chosen(swollen, finger, ridged) is finger
-    assert _chosen(finger, swollen, ridged) is finger
-    assert _chosen(None, finger, ridged) is finger and _chosen(finger, None, ridged) is finger
-    assert _chosen(None, None, ridged) is None
+    assert _chosen(swollen, cut(finger), ridged) is finger
+    assert _chosen(finger, cut(swollen), ridged) is finger
+    assert _chosen(None, cut(finger), ridged) is finger and _chosen(finger, cut(None), ridged) is finger
+    assert _chosen(None, cut(None), ridged) is None
     part = finger & (cols < 130)  # a cut holding a share of the ridges only
-    assert _chosen(part, finger, ridged) is finger and REPEATED_MORE > 1.0
+    assert _chosen(part, cut(finger), ridged) is finger and REPEATED_MORE > 1.0
     # the second cut is made only where it could be taken
-    assert not _may_be_bettered(finger, ridged)
-    assert _may_be_bettered(None, ridged) and _may_be_bettered(other, ridged) and _may_be_bettered(part, ridged)
-    assert _may_be_bettered(swollen, ridged)
+    cuts.clear()
+    assert _chosen(finger, cut(other), ridged) is finger and not cuts
+    for plain in (None, other, part, swollen):
+        cuts.clear()
+        _chosen(plain, cut(finger), ridged)
+        assert len(cuts) == 1

@@ -35,6 +35,8 @@ or one too blurred to show ridges). Pure numpy/OpenCV.
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import cv2
 import numpy as np
 
@@ -420,35 +422,29 @@ def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: flo
     return _refined(colour8, piece, evidence, period, ring_width, reach_share)
 
 
-def _chosen(plain: np.ndarray | None, again: np.ndarray | None, repeated: np.ndarray) -> np.ndarray | None:
+def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None],
+            repeated: np.ndarray) -> np.ndarray | None:
     """Of the mask cut from the plain ridge score and the one cut from the score that asks the ridges to repeat
-    (``repeated``, :func:`ridge_score`), the plain one, unless the other holds :data:`REPEATED_MORE` times its
-    repeating ridges (the plain one found something else: a thing whose edges and lines read as ridges, or a finger
-    whose ridges are too fine for the working copy) or the plain one swells past the finger by :data:`SWELL_MARGIN`
-    more than the other (:func:`~fingersplat3d.segment.silhouette.outline_swell`: something of the skin's colour
-    joined to it). Either where the other is None."""
-    if plain is None or again is None:
-        return again if plain is None else plain
-    ridged = repeated > RIDGE_LEVEL
-    if np.count_nonzero(ridged & again) > REPEATED_MORE * np.count_nonzero(ridged & plain):
-        return again
-    swell, again_swell = outline_swell(plain), outline_swell(again)
-    if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell:
-        return again
-    return plain
-
-
-def _may_be_bettered(plain: np.ndarray | None, repeated: np.ndarray) -> bool:
-    """Whether :func:`_chosen` could take another cut over ``plain``: where no cut can hold :data:`REPEATED_MORE` times
-    its repeating ridges (it holds that share of the image's already) and its swell is within :data:`SWELL_MARGIN`
-    (no other's is under 1), the second cut is not made."""
+    (``cut_again()``, None where it finds no finger; ``repeated``, :func:`ridge_score`), the plain one, unless the
+    other holds :data:`REPEATED_MORE` times its repeating ridges (the plain one found something else: a thing whose
+    edges and lines read as ridges, or a finger whose ridges are too fine for the working copy) or the plain one swells
+    past the finger by :data:`SWELL_MARGIN` more than the other
+    (:func:`~fingersplat3d.segment.silhouette.outline_swell`: something of the skin's colour joined to it). Either
+    where the other is None. The second cut is made only where it could be taken: not where the plain one holds that
+    share of the image's repeating ridges already and swells within the margin (no mask's swell is under 1)."""
     if plain is None:
-        return True
+        return cut_again()
     ridged = repeated > RIDGE_LEVEL
-    if REPEATED_MORE * np.count_nonzero(ridged & plain) < np.count_nonzero(ridged):
-        return True
-    swell = outline_swell(plain)
-    return swell is not None and swell > SWELL_MARGIN
+    held, swell = np.count_nonzero(ridged & plain), outline_swell(plain)
+    if REPEATED_MORE * held >= np.count_nonzero(ridged) and (swell is None or swell <= SWELL_MARGIN):
+        return plain
+    again = cut_again()
+    if again is None:
+        return plain
+    if np.count_nonzero(ridged & again) > REPEATED_MORE * held:
+        return again
+    again_swell = outline_swell(again)
+    return again if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell else plain
 
 
 def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.ndarray:
@@ -470,23 +466,26 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     if ring.all():  # a strip thinner than two border rings: nothing inside them to be a finger
         raise InputError(f"{name}: no finger found: the image is {width}x{height} pixels, too thin to hold one")
     work = (gray, colour, colour8, ring, ring_width)
-    photo_gray = _gray(np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)) if factor < 1.0 else None
-    repeated = _ridge_evidence(gray, photo_gray, repeated=True)
+    full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
+    repeated = _ridge_evidence(gray, _gray(full) if factor < 1.0 else None, repeated=True)
+
+    def cut(evidence: tuple[np.ndarray, np.ndarray], reach: float) -> np.ndarray:
+        return fill_holes(_to_border(_cut(work, *evidence, reach), ring_width))
+
+    def cut_again() -> np.ndarray | None:
+        try:
+            return cut(repeated, REPEATED_REACH_SHARE)
+        except InputError:
+            return None
+
     try:
-        plain, problem = fill_holes(_to_border(_cut(work, *_ridge_evidence(gray), RIDGE_REACH_SHARE), ring_width)), None
+        plain, problem = cut(_ridge_evidence(gray), RIDGE_REACH_SHARE), None
     except InputError as error:
         plain, problem = None, error
-    again = None
-    if _may_be_bettered(plain, repeated[0]):
-        try:
-            again = fill_holes(_to_border(_cut(work, *repeated, REPEATED_REACH_SHARE), ring_width))
-        except InputError as error:
-            problem = problem or error
-    finger = _chosen(plain, again, repeated[0])
+    finger = _chosen(plain, cut_again, repeated[0])
     if finger is None:
         raise InputError(f"{name}: {problem}")
     if factor < 1.0:  # back to full size with a smooth edge
         finger = cv2.resize(finger.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR) > 0.5
-    full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
     full = full if full.ndim == 3 else np.repeat(full[..., None], 3, axis=2)
     return _on_the_edge(full, finger, 2.0 / factor + 1.0)
