@@ -130,17 +130,25 @@ def ridge_score(gray: np.ndarray, period: float, repeated: bool = False) -> np.n
     (``e / (e + 8 median)``); ``repeated``: times how far the band repeats a period across its own direction
     (:func:`repetition` through :data:`REPEAT_GATE`: a sharp line or edge puts most of its energy in the band too, but
     once)."""
+    score, band, energy = _periodic_score(gray, period)
+    return (_repeated_score(score, band, energy, period) if repeated else score).astype(np.float32)
+
+
+def _periodic_score(gray: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`ridge_score`'s plain score at ``period``, with the ridge band and its smoothed energy it came from."""
     blurred = [gray] + [cv2.GaussianBlur(gray, (0, 0), sigma) for sigma in (0.15 * period, 0.45 * period, 1.35 * period)]
     fine_band, ridge_band, coarse_band = (blurred[k] - blurred[k + 1] for k in range(3))
     smooth = [cv2.GaussianBlur(band * band, (0, 0), period) for band in (fine_band, ridge_band, coarse_band)]  # ~2 ridges
     fine, ridge, coarse = smooth
     periodic = ridge / np.maximum(ridge + coarse + fine, 1e-12)
     floor = STRENGTH_FLOOR * max(float(np.median(ridge)), 1e-12)
-    score = periodic * ridge / (ridge + floor)
-    if repeated:
-        low, high = REPEAT_GATE
-        score = score * np.clip((repetition(ridge_band, ridge, period) - low) / (high - low), 0.0, 1.0)
-    return score.astype(np.float32)
+    return periodic * ridge / (ridge + floor), ridge_band, ridge
+
+
+def _repeated_score(score: np.ndarray, band: np.ndarray, energy: np.ndarray, period: float) -> np.ndarray:
+    """A plain score times how far its ``band`` repeats (:func:`repetition` through :data:`REPEAT_GATE`)."""
+    low, high = REPEAT_GATE
+    return score * np.clip((repetition(band, energy, period) - low) / (high - low), 0.0, 1.0)
 
 
 def repetition(band: np.ndarray, energy: np.ndarray, period: float) -> np.ndarray:
@@ -163,15 +171,18 @@ def repetition(band: np.ndarray, energy: np.ndarray, period: float) -> np.ndarra
     return best
 
 
-def _ridge_evidence(gray: np.ndarray, photo: np.ndarray | None = None,
-                    repeated: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _ridge_evidence(gray: np.ndarray, photo: np.ndarray | None = None) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """The best ridge score over the searched periods, per pixel of ``gray`` (the working copy), and the period
-    (working px) that gave it; ``repeated``: the scores that ask the ridges to repeat (:func:`ridge_score`). With
-    ``photo`` (the gray photo at its own size, larger than ``gray``), the ridges finer than :data:`PERIODS_PX` too
-    (:data:`FINE_PERIODS_PX`), each scored on a copy of the photo enlarged so that it is at least the smallest searched
-    period there, and averaged back onto the working grid."""
+    (working px) that gave it: plain, and asking the ridges to repeat (:func:`ridge_score`; each period's bands made
+    once for both). With ``photo`` (the gray photo at its own size, larger than ``gray``), the repeating ridges finer
+    than :data:`PERIODS_PX` too (:data:`FINE_PERIODS_PX`), each scored on a copy of the photo enlarged so that it is at
+    least the smallest searched period there, and averaged back onto the working grid."""
     height, width = gray.shape
-    scores = [ridge_score(gray, period, repeated) for period in PERIODS_PX]
+    plain, repeated = [], []
+    for period in PERIODS_PX:
+        score, band, energy = _periodic_score(gray, period)
+        plain.append(score.astype(np.float32))
+        repeated.append(_repeated_score(score, band, energy, period).astype(np.float32))
     periods = list(PERIODS_PX)
     enlarged = {}
     for period in FINE_PERIODS_PX if photo is not None else ():
@@ -180,9 +191,14 @@ def _ridge_evidence(gray: np.ndarray, photo: np.ndarray | None = None,
             continue  # the photo has not the pixels to show ridges that fine
         if zoom not in enlarged:
             enlarged[zoom] = cv2.resize(photo, (zoom * width, zoom * height), interpolation=cv2.INTER_AREA)
-        score = ridge_score(enlarged[zoom], zoom * period, repeated)
-        scores.append(cv2.resize(score, (width, height), interpolation=cv2.INTER_AREA))
+        score = ridge_score(enlarged[zoom], zoom * period, repeated=True)
+        repeated.append(cv2.resize(score, (width, height), interpolation=cv2.INTER_AREA))
         periods.append(period)
+    return _best(plain, PERIODS_PX), _best(repeated, periods)
+
+
+def _best(scores: list[np.ndarray], periods) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel, the best of ``scores`` and the period of the one that gave it."""
     stacked = np.stack(scores)
     return stacked.max(0), np.asarray(periods, np.float32)[stacked.argmax(0)]
 
@@ -467,7 +483,7 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
         raise InputError(f"{name}: no finger found: the image is {width}x{height} pixels, too thin to hold one")
     work = (gray, colour, colour8, ring, ring_width)
     full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
-    repeated = _ridge_evidence(gray, _gray(full) if factor < 1.0 else None, repeated=True)
+    plain_evidence, repeated = _ridge_evidence(gray, _gray(full) if factor < 1.0 else None)
 
     def cut(evidence: tuple[np.ndarray, np.ndarray], reach: float) -> np.ndarray:
         return fill_holes(_to_border(_cut(work, *evidence, reach), ring_width))
@@ -479,7 +495,7 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
             return None
 
     try:
-        plain, problem = cut(_ridge_evidence(gray), RIDGE_REACH_SHARE), None
+        plain, problem = cut(plain_evidence, RIDGE_REACH_SHARE), None
     except InputError as error:
         plain, problem = None, error
     finger = _chosen(plain, cut_again, repeated[0])
