@@ -189,6 +189,21 @@ def test_depth_order_is_a_stable_sort_with_ties_in_index_order():
     assert np.array_equal(depth_order(many.astype(np.float64), keep), expected)
 
 
+def test_radix_order_is_numpys_stable_sort_over_every_positive_float():
+    """The radix sort of float32 bits orders as numpy's stable argsort of the floats: across the whole positive range
+    (subnormals to the largest float, each bit group of the key used) and with many ties."""
+    from fingersplat3d.splat.cpu_composite import radix_order
+
+    rng = np.random.default_rng(3)
+    spread = rng.integers(1, 0x7F7FFFFF, 20000, dtype=np.uint32).view(np.float32)  # any positive finite float
+    tied = rng.choice(np.array([1e-40, 0.5, 0.5000001, 3.0, 7e30], np.float32), 20000)
+    for depths in (spread, tied, np.concatenate([spread, tied])):
+        index = rng.permutation(depths.shape[0]).astype(np.int64)  # any order of indices, kept among ties
+        expected = index[np.argsort(depths, kind="stable")]
+        assert np.array_equal(radix_order(depths.view(np.uint32), index), expected)
+    assert radix_order(np.zeros(0, np.uint32), np.zeros(0, np.int64)).shape == (0,)
+
+
 def test_numba_backend_refuses_other_devices_and_unknown_names():
     args, width, height = random_scene(0, n=5)
     with pytest.raises(ValueError, match="backend must be one of"):

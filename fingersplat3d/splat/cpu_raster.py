@@ -14,7 +14,8 @@ from torch import Tensor
 from torch.autograd.function import once_differentiable
 
 from ..device import numba_threads
-from .cpu_composite import TILE, bin_tiles, composite_backward, composite_forward, gather_pairs, prepare, reduce_pairs
+from .cpu_composite import (TILE, bin_tiles, composite_backward, composite_forward, gather_pairs, prepare, radix_order,
+                            reduce_pairs)
 from .cpu_project import project_backward, project_forward
 from .project import Projection, near_in_dtype
 
@@ -22,14 +23,13 @@ __all__ = ["composite_cpu", "project_cpu"]
 
 
 def depth_order(depths: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Indices of the ``valid`` Gaussians front to back, ties in index order (a stable sort).
-    float32 depths (positive: drawn Gaussians are beyond the near plane) sort as one uint64 key,
-    depth bits above index bits, which halves the time of a stable argsort."""
+    """Indices of the ``valid`` Gaussians front to back, ties in index order (a stable sort). float32 depths
+    (positive: drawn Gaussians are beyond the near plane) by their bits in :func:`.cpu_composite.radix_order`;
+    others by numpy's stable argsort."""
     visible = np.flatnonzero(valid)
     if depths.dtype != np.float32 or not (depths[visible] > 0).all():
         return visible[np.argsort(depths[visible], kind="stable")]
-    keys = (depths[visible].view(np.uint32).astype(np.uint64) << np.uint64(32)) | visible.astype(np.uint64)
-    return (np.sort(keys) & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    return radix_order(np.ascontiguousarray(depths[visible]).view(np.uint32), visible.astype(np.int64))
 
 
 def _numpy(t: Tensor) -> np.ndarray:

@@ -16,7 +16,7 @@ from typing import Callable
 
 __all__ = ["KERNEL_NAMES", "kernels_cached", "warm_up", "ensure_compiled"]
 
-KERNEL_NAMES = {"cpu_composite": ("_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
+KERNEL_NAMES = {"cpu_composite": ("radix_order", "_records", "bin_tiles", "gather_pairs", "reduce_pairs"),
                 "cpu_project": ("_forward_kernel", "_forward_lanes", "project_backward", "_backward_lanes"),
                 "cpu_shading": ("_facing",),
                 "normal_matrix": ("_upper_gram",)}
