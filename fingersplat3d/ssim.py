@@ -13,13 +13,14 @@ evaluation score should. ``tests/test_ssim.py`` checks it against scikit-image's
 ``structural_similarity`` with Wang et al.'s settings.
 
 Large images (a window of :data:`BANDED_MIN_PIXELS` or more: a phone photo's finger fitted at 16 px a ridge) go
-through :class:`_BandedSSIM` instead, the same map to rounding: the map and its gradient worked out a band of
-:data:`BAND_ROWS` rows at a time, with the gradient written by hand (``dS/dmu_x``, ``dS/de_xx``, ``dS/de_xy``
-blurred back and combined with the image), nothing kept for the backward pass but the two images and the target's
-blurs. Autograd's graph held every intermediate map at full size (a 3717x1150 colour window: +520 MB and 1.5 s a
-loss and its gradient; banded +170-190 MB and 0.85-1.0 s, the bands' stacks staying in the cache). Under that size
-the graph stays: the bands' recomputed blurs cost more than they save (640x512: 29 against 41 ms). The graph path
-is the banded one's reference in the tests (float64, gradcheck).
+through :class:`_BandedSSIM` instead, the same map (to the bit in float32) and gradient (to rounding): both worked
+out a band of :data:`BAND_ROWS` rows at a time, the gradient written by hand (``dS/dmu_x``, ``dS/de_xx``,
+``dS/de_xy`` blurred back and combined with the image), nothing kept for the backward pass but the two images and
+the target's blurs. Autograd's graph held every intermediate map at full size (a 3717x1150 colour window: +520-560
+MB and 1.5 s a loss and its gradient; banded +170-380 MB and 0.85-1.06 s, the bands' stacks staying in the cache; a
+phone-like capture's fuse peaked at 4.08 GB, 3.38 GB banded: docs/measurements.md, stop 92). Under that size the
+graph stays: the bands' recomputed blurs cost more than they save (640x512: 29 against 41 ms). The graph path is the
+banded one's reference in the tests (float64, gradcheck).
 
 Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors. Pure torch.
 """
