@@ -19,8 +19,9 @@ out a band of :data:`BAND_ROWS` rows at a time, the gradient written by hand (``
 the target's blurs. Autograd's graph held every intermediate map at full size (a 3717x1150 colour window: +520-560
 MB and 1.5 s a loss and its gradient; banded +170-380 MB and 0.85-1.06 s, the bands' stacks staying in the cache; a
 phone-like capture's fuse peaked at 4.08 GB, 3.38 GB banded: docs/measurements.md, stop 92). Under that size the
-graph stays: the bands' recomputed blurs cost more than they save (640x512: 29 against 41 ms). The graph path is the
-banded one's reference in the tests (float64, gradcheck).
+graph stays: the bands' recomputed blurs cost more than they save (640x512: 29 against 41 ms); so does a GPU's, whose
+memory holds the graph and whose kernel launches the bands would multiply. The graph path is the banded one's
+reference in the tests (float64, gradcheck).
 
 Images are ``[H, W, C]`` (or ``[H, W]``, read as one channel) float tensors. Pure torch.
 """
@@ -32,8 +33,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-__all__ = ["ssim_map", "ssim_reference", "SSIMReference", "image_pair", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1", "SSIM_C2",
-           "BANDED_MIN_PIXELS", "BAND_ROWS"]
+__all__ = ["ssim_map", "ssim_reference", "SSIMReference", "image_pair", "SSIM_WINDOW", "SSIM_SIGMA", "SSIM_C1",
+           "SSIM_C2", "BANDED_MIN_PIXELS", "BAND_ROWS"]
 
 SSIM_WINDOW = 11
 SSIM_SIGMA = 1.5
@@ -155,7 +156,7 @@ def ssim_map(render: torch.Tensor, target: torch.Tensor | SSIMReference, *, padd
     x = render.permute(2, 0, 1)[None]  # [1, C, H, W]
     y = reference.image.to(dtype=x.dtype, device=x.device)
     mu_y, e_yy = reference.mean.to(x), reference.square.to(x)
-    if render.shape[0] * render.shape[1] >= BANDED_MIN_PIXELS:
+    if x.device.type == "cpu" and render.shape[0] * render.shape[1] >= BANDED_MIN_PIXELS:  # a GPU: the graph in one go
         return _banded(x, y, mu_y, e_yy, reference.padding)[0].permute(1, 2, 0)
     return _graph(x, y, mu_y, e_yy, reference.padding)[0].permute(1, 2, 0)
 
@@ -219,7 +220,8 @@ class _BandedSSIM(torch.autograd.Function):
         out = torch.empty((1, x.shape[1], height, width), dtype=x.dtype, device=x.device)
         for first in range(0, height, BAND_ROWS):
             last = min(height, first + BAND_ROWS)
-            a, b, c, d = _terms(*_band_moments(x, y, first, last, pad), mu_y[..., first:last, :], e_yy[..., first:last, :])
+            moments = _band_moments(x, y, first, last, pad)
+            a, b, c, d = _terms(*moments, mu_y[..., first:last, :], e_yy[..., first:last, :])
             out[..., first:last, :] = a.mul_(b).div_(c.mul_(d))
         ctx.save_for_backward(x, y, mu_y, e_yy)
         ctx.pad = pad
@@ -231,7 +233,7 @@ class _BandedSSIM(torch.autograd.Function):
         pad, reach = ctx.pad, SSIM_WINDOW - 1
         height = grad.shape[-2]
         dx = torch.empty_like(x)
-        for top in range(0, x.shape[-2], BAND_ROWS):  # rows top .. bottom - 1 of x take from the map's first .. last - 1
+        for top in range(0, x.shape[-2], BAND_ROWS):  # x's rows top .. bottom - 1 take from the map's first .. last - 1
             bottom = min(x.shape[-2], top + BAND_ROWS)
             first, last = top + pad - reach, bottom + pad
             inner = (max(0, first), min(height, last))

@@ -71,7 +71,8 @@ def _both_paths(render, target, padding):
 @pytest.mark.parametrize("shape, band", [((37, 23, 3), 4), ((12, 9, 1), 64), ((40, 31, 2), 8), ((6, 30, 1), 2)])
 def test_banded_map_and_gradient_are_the_graphs(monkeypatch, padding, shape, band):
     """Band by band with the gradient written out, or as autograd's graph of whole images: the same map and gradient
-    (float64), whether the image is one band or many, its rows a multiple of the band or not, thinner than the window."""
+    (float64), whether the image is one band or many, its rows a multiple of the band or not, thinner than the
+    window."""
     from fingersplat3d import ssim
 
     monkeypatch.setattr(ssim, "BAND_ROWS", band)
