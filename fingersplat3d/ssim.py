@@ -162,12 +162,13 @@ def ssim_map(render: torch.Tensor, target: torch.Tensor | SSIMReference, *, padd
 
 
 def _terms(mu_x, e_xx, e_xy, mu_y, e_yy) -> tuple[torch.Tensor, ...]:
-    """SSIM's four factors, ``S = a b / (c d)``: the means' and the (co)variances' numerators and denominators."""
-    mu_xy, mu_xx = mu_x * mu_y, mu_x * mu_x
+    """SSIM's four factors, ``S = a b / (c d)``: the means' and the (co)variances' numerators and denominators. (In this
+    order of operations, the graph's gradient is the one the fits were measured with, to the bit.)"""
+    mu_xx, mu_yy, mu_xy = mu_x * mu_x, mu_y * mu_y, mu_x * mu_y
     a = 2.0 * mu_xy + SSIM_C1
     b = 2.0 * (e_xy - mu_xy) + SSIM_C2
-    c = mu_xx + mu_y * mu_y + SSIM_C1
-    d = (e_xx - mu_xx) + (e_yy - mu_y * mu_y) + SSIM_C2
+    c = mu_xx + mu_yy + SSIM_C1
+    d = (e_xx - mu_xx) + (e_yy - mu_yy) + SSIM_C2
     return a, b, c, d
 
 
