@@ -27,9 +27,10 @@ def depth_order(depths: np.ndarray, valid: np.ndarray) -> np.ndarray:
     (positive: drawn Gaussians are beyond the near plane) by their bits in :func:`.cpu_composite.radix_order`;
     others by numpy's stable argsort."""
     visible = np.flatnonzero(valid)
-    if depths.dtype != np.float32 or not (depths[visible] > 0).all():
-        return visible[np.argsort(depths[visible], kind="stable")]
-    return radix_order(np.ascontiguousarray(depths[visible]).view(np.uint32), visible.astype(np.int64))
+    drawn = depths[visible]  # gathered once (a new, contiguous array): the test and the sort read it
+    if depths.dtype != np.float32 or not (drawn > 0).all():
+        return visible[np.argsort(drawn, kind="stable")]
+    return radix_order(drawn.view(np.uint32), visible.astype(np.int64, copy=False))
 
 
 def _numpy(t: Tensor) -> np.ndarray:
