@@ -1,6 +1,6 @@
 """Fingers of another make: a photographed skin texture on a finger shaped apart from ``fs3d synth``'s, fused blind.
 
-    python3 tools/bench_textured.py [--texture PNG] [--seeds 8] [--size 640x512] [--views 3] [--spread 45]
+    python3 tools/bench_textured.py [--texture PNG] [--seeds 8] [--first-seed 0] [--size 640x512] [--views 3] [--spread 45]
                                     [--distance 54] [--field 41.6] [--background KIND]
                                     [--crop [WIDTHS]] [--focal-given] [--pitch DEG] [--along DEG]
                                     [--front-zoom Z] [--k1 K] [--nearer MM]
@@ -93,6 +93,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--texture", type=Path, default=DEFAULT_TEXTURE, help="a finger's texture photo, tip up, on black")
     parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument("--first-seed", type=int, default=0, help="the first seed (seeds FIRST..FIRST+SEEDS-1)")
     parser.add_argument("--size", type=_size, default=(640, 512))
     parser.add_argument("--views", type=int, choices=sorted(RINGS), default=3)
     parser.add_argument("--spread", type=float, default=45.0, metavar="DEG",
@@ -125,16 +126,16 @@ def main() -> int:
     args = parser.parse_args()
     if not args.texture.is_file():
         raise InputError(f"{args.texture}: no texture photo there (IMPOSE's sample2_texture.png: --texture PATH)")
-    if not 1 <= args.seeds <= 100 or not 20.0 <= args.distance <= 2000.0 or not 0.2 <= (args.crop or 1.0) <= 3.0 \
+    if not 1 <= args.seeds <= 100 or args.first_seed < 0 or not 20.0 <= args.distance <= 2000.0 or not 0.2 <= (args.crop or 1.0) <= 3.0 \
             or not 5.0 <= args.spread <= 80.0 or not 10.0 <= args.field <= 1000.0 \
             or not 0.0 <= args.relief <= 0.5 or not 0.0 <= args.specular <= 1.0 or not -0.5 <= args.k1 <= 0.5 \
             or not -20.0 <= args.nearer <= 20.0:
-        raise InputError("--seeds must lie in 1..100, --spread in 5..80°, --field in 10..1000 mm, --distance in 20..2000 mm, "
+        raise InputError("--seeds must lie in 1..100, --first-seed be 0 or more, --spread in 5..80°, --field in 10..1000 mm, --distance in 20..2000 mm, "
                          "--crop in 0.2..3 widths, --relief in "
                          "0..0.5 mm, --specular in 0..1, --k1 in -0.5..0.5 and --nearer in -20..20 mm")
     texture = skin_texture(args.texture)
     rows = []
-    for seed in range(args.seeds):
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         finger = random_finger(np.random.default_rng(seed))
         if args.pitch is not None:
             finger = replace(finger, pitch_deg=args.pitch * (-1) ** seed)
