@@ -66,3 +66,16 @@ def test_summary_of_failures_alone_stays_finite_where_it_can():
     summary = sweep_summary([(StressSetting(20, 5, 30.0, 45.0), {"status": "failed", "reason": "x"})])
     assert summary[0]["fuses"] == 1 and summary[0]["failed"] == 1 and summary[0]["off_unwarned"] == 0
     assert np.isnan(summary[0]["worst_pair_median_deg"])
+
+
+def test_the_sweep_s_picture_draws_every_kind(tmp_path):
+    from fingersplat3d.experiments.plots import sweep_picture
+    from fingersplat3d.experiments.stress import sweep_points
+
+    three, two = StressSetting(20, 3, 45.0, 54.0), StressSetting(21, 2, 45.0, 54.0, focal_given=True)
+    records = [(three, _row(0.3, 0.05, False)), (three, _row(3.0, 0.2, True)), (two, _row(0.0, 0.04, False)),
+               (three, {"status": "failed", "reason": "mask"})]
+    points = sweep_points(records)
+    assert list(points) == [KINDS[0], KINDS[1]] and len(points[KINDS[0]]) == 2
+    path = sweep_picture(tmp_path / "sweep.png", points, WARN_ABOVE_DEG, DEPTH_TARGET_MM, "sweep", "machine")
+    assert path.stat().st_size > 10_000

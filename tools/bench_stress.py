@@ -1,13 +1,14 @@
 """A generalisation sweep: fingers of another make under settings drawn at random, several stressors at once.
 
     python3 tools/bench_stress.py [--count 28] [--seed 1] [--fingers 2] [--jobs 2] [--size 640x512] [--json OUT]
+                                  [--picture PNG]
 
 Draws ``--count`` settings (:func:`fingersplat3d.experiments.stress.draw_settings`: views, spread, distance, pitch,
 crop, lens distortion, the finger off centre, ridges in relief with a highlight, the front camera zoomed, a phone's
 background, the focal given or fitted) and fuses ``--fingers`` fingers under each with ``tools/bench_textured.py`` (its
 own process, the photos alone, geometry only). Prints each setting's row and the summary by kind of capture
-(:func:`~fingersplat3d.experiments.stress.sweep_summary`), with the machine. ``--jobs 2`` runs two settings side by
-side, each on one thread.
+(:func:`~fingersplat3d.experiments.stress.sweep_summary`), with the machine; ``--picture``: every capture by its worst
+pair's turn error and its depth error, warned or not. ``--jobs 2`` runs two settings side by side, each on one thread.
 """
 from __future__ import annotations
 
@@ -40,7 +41,9 @@ def _run(setting, fingers: int, size: str, jobs: int, scratch: Path, index: int)
 def main() -> int:
     from fingersplat3d.errors import InputError
     from fingersplat3d.eval.machine import machine
-    from fingersplat3d.experiments.stress import DEPTH_TARGET_MM, WARN_ABOVE_DEG, draw_settings, sweep_summary
+    from fingersplat3d.experiments.plots import sweep_picture
+    from fingersplat3d.experiments.stress import (DEPTH_TARGET_MM, WARN_ABOVE_DEG, draw_settings, sweep_points,
+                                                  sweep_summary)
     from tqdm import tqdm
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -50,6 +53,7 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2, help="settings run side by side (default 2)")
     parser.add_argument("--size", default="640x512", help="photo size WIDTHxHEIGHT (default 640x512)")
     parser.add_argument("--json", type=Path, help="write every setting and row here")
+    parser.add_argument("--picture", type=Path, help="draw every capture's turn and depth errors here (PNG)")
     args = parser.parse_args()
     if not 1 <= args.count <= 1000 or not 1 <= args.fingers <= 20 or not 1 <= args.jobs <= 16:
         raise InputError("--count must lie in 1..1000, --fingers in 1..20 and --jobs in 1..16")
@@ -77,6 +81,10 @@ def main() -> int:
         print(f"| {s['kind']} | {s['fuses']} | {s['failed']} | {s['registered_all']} | {s['worst_pair_median_deg']:.2f} "
               f"({s['worst_pair_max_deg']:.2f}) | {s['within_1_deg']} / {s['within_2_deg']} | {s['depth_median_mm']:.3f} "
               f"({s['depth_max_mm']:.3f}) | {s['depth_within_target']} | **{s['off_unwarned']}** |")
+    if args.picture:
+        sweep_picture(args.picture, sweep_points(records), WARN_ABOVE_DEG, DEPTH_TARGET_MM,
+                      f"{args.count} settings drawn at random, {args.fingers} fingers each (bench_stress.py --seed {args.seed})",
+                      f"{info['cpu']}, {info['cores']} cores; {args.size}; fingers of another make, the photos alone")
     if args.json:
         args.json.write_text(json.dumps({"machine": info, "args": {k: str(v) for k, v in vars(args).items()},
                                          "records": [{"setting": vars(s), "row": r} for s, r in records],

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["StressSetting", "draw_settings", "KINDS", "WARN_ABOVE_DEG", "DEPTH_TARGET_MM", "kind_of", "sweep_summary"]
+__all__ = ["StressSetting", "draw_settings", "KINDS", "WARN_ABOVE_DEG", "DEPTH_TARGET_MM", "kind_of", "sweep_points",
+           "sweep_summary"]
 
 WARN_ABOVE_DEG = 2.0
 """A capture whose worst pair is turned further off than this should carry a warning (issue 22: "a user must be able
@@ -133,3 +134,14 @@ def sweep_summary(records: list[tuple[StressSetting, dict]]) -> list[dict]:
             "off_unwarned": sum(1 for row, w in zip(done, worst) if w > WARN_ABOVE_DEG and not row.get("warned")),
         })
     return summary
+
+
+def sweep_points(records: list[tuple[StressSetting, dict]]) -> dict[str, list[tuple[float, float, bool]]]:
+    """``{kind: [(worst pair's turn error, depth MAE, warned), ...]}`` of the fuses that ran, for
+    :func:`~fingersplat3d.experiments.plots.sweep_picture`."""
+    points: dict[str, list[tuple[float, float, bool]]] = {}
+    for setting, row in records:
+        if row.get("status") == "done":
+            points.setdefault(kind_of(setting), []).append(
+                (float(row["rotation_max_deg"]), float(row["depth_mae_mm"]), bool(row.get("warned"))))
+    return {kind: points[kind] for kind in KINDS if kind in points}
