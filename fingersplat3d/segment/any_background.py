@@ -498,7 +498,7 @@ def _crossing_cut(work: tuple, evidence: tuple[np.ndarray, np.ndarray], cut: Cal
     :data:`MIN_CROSSING_SHARE` of the ring is off its own colour. Measured: a finger of another make cropped to 0.9
     widths on a bright desk, its ridges fainter than the desk's grain (8 % of the finger over the ridge level against
     22 % of the frame): no finger found by the other cuts (the largest area of ridges lay on the desk, and GrabCut
-    learned the skin crossing the ring as background); this cut IoU 0.994 (docs/measurements.md, stop 93)."""
+    learned the skin crossing the ring as background); with this cut IoU 0.999 (docs/measurements.md, stop 93)."""
     gray, colour, colour8, ring, ring_width = work
     crossing = _off_ring(colour, ring)
     if crossing.sum() < MIN_CROSSING_SHARE * ring.sum():
