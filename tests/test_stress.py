@@ -79,3 +79,15 @@ def test_the_sweep_s_picture_draws_every_kind(tmp_path):
     assert list(points) == [KINDS[0], KINDS[1]] and len(points[KINDS[0]]) == 2
     path = sweep_picture(tmp_path / "sweep.png", points, WARN_ABOVE_DEG, DEPTH_TARGET_MM, "sweep", "machine")
     assert path.stat().st_size > 10_000
+
+
+def test_the_sweep_s_bad_settings_end_in_one_sentence():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    tool = Path(__file__).resolve().parents[1] / "tools" / "bench_stress.py"
+    for args in (["--size", "12x5"], ["--count", "0"]):
+        done = subprocess.run([sys.executable, str(tool), *args], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2 and "Traceback" not in done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1 and ("--size" in done.stderr or "--count" in done.stderr)

@@ -57,6 +57,9 @@ def main() -> int:
     args = parser.parse_args()
     if not 1 <= args.count <= 1000 or not 1 <= args.fingers <= 20 or not 1 <= args.jobs <= 16:
         raise InputError("--count must lie in 1..1000, --fingers in 1..20 and --jobs in 1..16")
+    sides = args.size.lower().split("x")
+    if len(sides) != 2 or not all(side.isdigit() and int(side) >= 64 for side in sides):
+        raise InputError(f"--size {args.size!r}: give it as WIDTHxHEIGHT, at least 64 px a side, e.g. 640x512")
     settings = draw_settings(args.seed, args.count)
     with tempfile.TemporaryDirectory() as scratch, ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = [pool.submit(_run, s, args.fingers, args.size, args.jobs, Path(scratch), i) for i, s in enumerate(settings)]
