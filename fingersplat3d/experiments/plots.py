@@ -18,6 +18,16 @@ def _pyplot():
     return plt
 
 
+def _finish(figure, path: Path, note: str = "") -> Path:
+    """Lay ``figure`` out, ``note`` (the machine) in small print under it, write it to ``path`` and close it."""
+    if note:
+        figure.text(0.01, 0.01, note, fontsize=7, color="0.35")
+    figure.tight_layout(rect=(0, 0.03 if note else 0, 1, 1))
+    figure.savefig(path)
+    _pyplot().close(figure)
+    return path
+
+
 def det_picture(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str) -> Path:
     """DET curves (FNMR against FMR, log axes) for ``{label: (fmr, fnmr)}``; rates of 0 are drawn
     at the plot's floor (half the smallest non-zero rate) so that steps to zero stay visible."""
@@ -37,10 +47,7 @@ def det_picture(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], ti
     axes.set_title(title)
     axes.grid(True, which="both", alpha=0.3)
     axes.legend(fontsize=8)
-    figure.tight_layout()
-    figure.savefig(path)
-    plt.close(figure)
-    return path
+    return _finish(figure, path)
 
 
 def trade_picture(path: Path, curves: dict[str, list[tuple[float, float, str]]], x_label: str, y_label: str,
@@ -60,12 +67,7 @@ def trade_picture(path: Path, curves: dict[str, list[tuple[float, float, str]]],
     axes.set_title(title, fontsize=10)
     axes.grid(True, alpha=0.3)
     axes.legend(fontsize=8)
-    if note:
-        figure.text(0.01, 0.01, note, fontsize=7, color="0.35")
-    figure.tight_layout(rect=(0, 0.03 if note else 0, 1, 1))
-    figure.savefig(path)
-    plt.close(figure)
-    return path
+    return _finish(figure, path, note)
 
 
 def sweep_picture(path: Path, points: dict[str, list[tuple[float, float, bool]]], warn_above_deg: float,
@@ -98,9 +100,4 @@ def sweep_picture(path: Path, points: dict[str, list[tuple[float, float, bool]]]
     axes.set_title(title, fontsize=10)
     axes.grid(True, which="both", alpha=0.3)
     axes.legend(fontsize=7, loc="upper left")
-    if note:
-        figure.text(0.01, 0.01, note, fontsize=7, color="0.35")
-    figure.tight_layout(rect=(0, 0.03 if note else 0, 1, 1))
-    figure.savefig(path)
-    plt.close(figure)
-    return path
+    return _finish(figure, path, note)

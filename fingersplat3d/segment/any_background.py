@@ -48,7 +48,7 @@ from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
 from ..structure_tensor import ridge_direction
-from .morphology import disc
+from .morphology import dilated, disc
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 from .silhouette import outline_swell, widest_disc
 
@@ -440,7 +440,7 @@ def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: flo
         labels[pad] = cv2.GC_FGD
     least = max(MIN_RIDGE_SHARE * gray.size, MIN_RIDGE_AREA_PX)
     piece = _ridged_piece(colour8, labels.copy(), evidence, least)
-    if piece is not None and crossing is not None and not (piece & _grown(crossing, ring_width)).any():
+    if piece is not None and crossing is not None and not (piece & dilated(crossing, ring_width)).any():
         piece = None  # a patch of the background's own texture, not a finger crossing the frame
     if piece is None:
         raise InputError("no finger found: nothing that stands apart from the frame's edges shows ridges "
@@ -489,17 +489,13 @@ def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None]
     return again if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell else plain
 
 
-def _grown(mask: np.ndarray, pixels: int) -> np.ndarray:
-    return cv2.dilate(mask.view(np.uint8), np.ones((2 * pixels + 1, 2 * pixels + 1), np.uint8)).view(bool)
-
-
 def _crossing_cut(work: tuple, evidence: tuple[np.ndarray, np.ndarray], cut: Callable) -> np.ndarray | None:
     """The finger's mask where it crosses the frame's border ring (a crop cut at both ends), or None: tried only where
     :data:`MIN_CROSSING_SHARE` of the ring is off its own colour. Measured: a finger of another make cropped to 0.9
     widths on a bright desk, its ridges fainter than the desk's grain (8 % of the finger over the ridge level against
     22 % of the frame): no finger found by the other cuts (the largest area of ridges lay on the desk, and GrabCut
     learned the skin crossing the ring as background); with this cut IoU 0.999 (docs/measurements.md, stop 93)."""
-    gray, colour, colour8, ring, ring_width = work
+    _, colour, _, ring, _ = work
     crossing = _off_ring(colour, ring)
     if crossing.sum() < MIN_CROSSING_SHARE * ring.sum():
         return None
