@@ -1,6 +1,7 @@
 """A finger on other backgrounds (phone photos): masks, and the registration of real captures composited on them.
 
     python3 tools/bench_backgrounds.py [--seeds 3] [--real ../shared/data/uwa-real-dev] [--fuse 1_1_2_1,2_2_7_1]
+                                       [--crops 20 [--crop-first-seed 7860] [--only-crops]]
 
 Masks: each view's finger composited onto each background of
 :data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS` (``fs3d synth`` uwa fingers at 640x512, grey and colour skin,
@@ -10,6 +11,10 @@ Per background and source: mask IoU median (min) and the outline's offset (media
 percentile of its distance), and how far it lies outside on average to a fraction of a pixel (the area between
 the masks over the true outline's length), px at the photo's size. ``--fuse``: those real captures fused (geometry
 only) from their composites on each background, each pair's turn against the same capture fused from its own photos.
+``--crops N``: the masks of fingers the frame cuts at both ends (no tip, no base), on each background: the real dev
+views cut as ``bench_real.py --crop-tip`` cuts them (:func:`~fingersplat3d.experiments.real_crops.tipless_window`
+on the dark-background mask), and N fingers of another make (``bench_textured.py``'s: IMPOSE's skin texture, coloured,
+three views +-40 degrees at 54 mm, 640x512) cut to 0.9 of the front view's finger width about the image centre.
 Markdown tables.
 """
 from __future__ import annotations
@@ -21,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fingersplat3d.errors import run_script
+from fingersplat3d.errors import InputError, run_script
 
 DEFAULT_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "uwa-real-dev"
 
@@ -62,6 +67,71 @@ def _mask_rows(source: str, views, truths, stream: int) -> None:
               f"{sum(iou < 0.9 for iou in ious)} of {len(ious)} | {np.nanmedian(outward):+.2f} | "
               f"{np.nanmedian(offsets):+.1f} | "
               f"{np.nanmedian(far):.1f} (worst {np.nanmax(far):.1f}) | {np.median(seconds):.1f} |", flush=True)
+
+
+def _crop_rows(folder: Path, count: int, first_seed: int) -> None:
+    """The ``--crops`` rows: masks of fingers cut at both ends on each background (see the module docstring)."""
+    from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
+    from fingersplat3d.experiments.geometry import columns_cropped
+    from fingersplat3d.experiments.real_crops import tipless_window
+    from fingersplat3d.experiments.textured_finger import random_finger, skin_texture, textured_capture
+    from fingersplat3d.scene import Capture
+    from fingersplat3d.segment.masks import finger_mask
+    from fingersplat3d.segment.silhouette import widest_disc
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_textured
+
+    print("\n| cut at both ends | background | mask IoU median (min) | IoU under 0.9 | no finger found |\n"
+          "|---|---|---|---|---|")
+    if folder.is_dir():
+        for stream, (finger, label) in enumerate((("1_1", "finger 1"), ("2_2", "finger 2, held out")), start=2):
+            views = _real_views(folder, finger)
+            truths = [finger_mask(view.image) for view in views]
+            windows = [tipless_window(truth) for truth in truths]
+            kept = [k for k, window in enumerate(windows) if window is not None]
+            for kind_index, kind in enumerate(BACKGROUNDS):
+                photos, masks = [], []
+                for k in kept:
+                    rng = np.random.default_rng([stream, k, kind_index])
+                    photo = on_background(views[k].image, truths[k], background(kind, views[k].image.shape, rng))
+                    photos.append(np.ascontiguousarray(photo[windows[k]]))
+                    masks.append(truths[k][windows[k]])
+                _iou_row(f"real dev views ({len(kept)}), {label}", kind, photos, masks)
+    texture = skin_texture(bench_textured.DEFAULT_TEXTURE)
+    skin = np.array(bench_textured.SKIN_RGB, np.float32)
+    for kind in BACKGROUNDS:
+        photos, masks = [], []
+        for seed in range(first_seed, first_seed + count):
+            capture = textured_capture(random_finger(np.random.default_rng(seed)), texture, size=(640, 512),
+                                       ring_deg=[-40, 0, 40], distance_mm=54.0, seed=seed)
+            scenes = np.random.default_rng(seed + 1000)
+            capture = Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
+                                                                background(kind, v.image.shape, scenes)))
+                                    for v in capture.views), capture.metadata)
+            front = capture.views[1]
+            centre, half = (front.width - 1) / 2.0, 0.45 * widest_disc(front.mask)
+            capture = columns_cropped(capture, int(np.ceil(centre - half)), int(np.floor(centre + half)))
+            photos += [view.image for view in capture.views]
+            masks += [view.mask for view in capture.views]
+        _iou_row(f"another make, 640x512 ({len(photos)}: seeds {first_seed}-{first_seed + count - 1}), 0.9 widths",
+                 kind, photos, masks)
+
+
+def _iou_row(source: str, kind: str, photos: list, truths: list) -> None:
+    """One row of the ``--crops`` table: each photo masked alone against its true mask."""
+    from fingersplat3d.errors import InputError
+    from fingersplat3d.segment.masks import finger_mask, mask_iou
+
+    ious, missed = [], 0
+    for photo, truth in zip(photos, truths):
+        try:
+            ious.append(mask_iou(finger_mask(photo), truth))
+        except InputError:
+            ious.append(0.0)
+            missed += 1
+    print(f"| {source} | {kind} | {np.median(ious):.3f} ({np.min(ious):.3f}) | {sum(iou < 0.9 for iou in ious)} of "
+          f"{len(ious)} | {missed} |", flush=True)
 
 
 def _fuse_rows(folder: Path, captures: list[str]) -> None:
@@ -106,9 +176,19 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=3, help="fs3d synth uwa fingers (640x512), grey and colour skin")
     parser.add_argument("--real", type=Path, default=DEFAULT_REAL, help="the real dev captures (skipped if absent)")
     parser.add_argument("--fuse", default="", help="real captures to fuse on each background, comma-separated")
+    parser.add_argument("--crops", type=int, default=0,
+                        help="also the masks of fingers cut at both ends: the real views, and this many fingers of "
+                             "another make")
+    parser.add_argument("--crop-first-seed", type=int, default=7860, help="the first of those fingers' seeds")
+    parser.add_argument("--only-crops", action="store_true", help="the --crops rows alone")
     args = parser.parse_args()
+    if args.crops < 0:
+        raise InputError(f"--crops must be 0 or more, got {args.crops}")
     info = machine()
     print(f"Machine: {info['cpu']}, {info['cores']} cores.\n")
+    if args.only_crops:
+        _crop_rows(args.real, args.crops, args.crop_first_seed)
+        return 0
     print("| views | background | mask IoU median (min) | IoU under 0.9 | outward px (area over outline), median | "
           "outline offset px, median | outline distance px, 90th pct median | mask s |\n"
           "|---|---|---|---|---|---|---|---|")
@@ -128,6 +208,8 @@ def main() -> int:
             _fuse_rows(args.real, [name for name in args.fuse.split(",") if name])
     else:
         print(f"\n(real captures not found at {args.real}: skipped)")
+    if args.crops:
+        _crop_rows(args.real, args.crops, args.crop_first_seed)
     return 0
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUT_SHARE", "crop_without_tip", "crop_table"]
+__all__ = ["CUT_SHARE", "crop_without_tip", "tipless_window", "crop_table"]
 
 CUT_SHARE = 0.3
 """The tip-side edge of the crop lies this share of the finger's width past the fingertip, along the finger."""
@@ -24,18 +24,27 @@ _MIN_HALF = 0.2  # the crop keeps at least this share of the finger's width on e
 
 def crop_without_tip(view, share: float = CUT_SHARE):
     """``view`` cropped about its image centre along the image axis nearest the finger's, the fingertip and ``share``
-    of the finger's width behind it outside the frame (at least :data:`_MIN_HALF` of the width kept each side of the
-    centre, the tip still half that share outside); None when the finger is not found or its tip lies too near or past
-    the centre for that."""
+    of the finger's width behind it outside the frame (:func:`tipless_window`); None when the finger is not found or
+    its tip lies too near or past the centre for that."""
     from ..errors import InputError
     from ..scene import View
     from ..segment.masks import finger_mask
-    from ..segment.silhouette import silhouette_frame, widest_disc
 
     try:
         mask = finger_mask(view.image, name=view.name)
     except InputError:
         return None
+    keep = tipless_window(mask, share)
+    return None if keep is None else View(view.name, view.image[keep])
+
+
+def tipless_window(mask: np.ndarray, share: float = CUT_SHARE) -> tuple[slice, slice] | None:
+    """The rows and columns of a crop of the finger ``mask`` (``[H, W]`` bool) about the image centre along the image
+    axis nearest the finger's, the fingertip and ``share`` of the finger's width behind it outside the window (at least
+    :data:`_MIN_HALF` of the width kept each side of the centre, the tip still half that share outside); None when its
+    tip lies too near or past the centre for that."""
+    from ..segment.silhouette import silhouette_frame, widest_disc
+
     frame = silhouette_frame(mask)
     width = widest_disc(mask)
     horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
@@ -52,8 +61,7 @@ def crop_without_tip(view, share: float = CUT_SHARE):
             0 <= centre - half and centre + half <= size - 1):
         return None
     first, last = int(np.ceil(centre - half)), int(np.floor(centre + half)) + 1
-    keep = (slice(None), slice(first, last)) if horizontal else (slice(first, last), slice(None))
-    return View(view.name, view.image[keep])
+    return (slice(None), slice(first, last)) if horizontal else (slice(first, last), slice(None))
 
 
 def crop_table(records: list[dict], deviations: dict) -> str:

@@ -18,7 +18,10 @@ one period and a slowly turning orientation. So:
    colours from skin and not from everything inside the ring;
 4. a last GrabCut told what the finger is (that piece's ridged area) and what it is not (everything outside the
    piece; inside it, what is far from the pad's colour, or far from any ridge, starts as probable background), so
-   that background stuff that went along with the finger falls away;
+   that background stuff that went along with the finger falls away; an earlier piece is kept instead where the
+   photo's edges along its outline are twice as strong and what it adds has the skin's hue (:func:`_best_supported`:
+   a later cut that dropped the finger's shaded half or its highlit band leaves an outline across the skin, on no
+   edge);
 5. the finger carried out across the border ring where it reaches it (a finger the frame cuts stays cut by the
    frame), holes filled;
 6. steps 2-5 again with a ridge score that also asks the texture to repeat itself a period across its own direction
@@ -32,14 +35,17 @@ one period and a slowly turning orientation. So:
 
 Where neither cut finds a finger and a twentieth of the border ring or more is far from the ring's own colour, a last
 cut (:func:`_crossing_cut`) takes those pixels for a finger the frame cuts at both ends, crossing the ring: probable
-finger instead of sure background, no area of ridges taken for sure finger, and the piece kept only if it reaches them.
+finger instead of sure background, no area of ridges taken for sure finger, and the piece kept only if it reaches them;
+where a mask was found whose outline lies on no edge of the photo and which holds under half of those pixels, the
+crossing cut is taken where it holds more of them and the photo's edges along its outline are twice as strong (a
+patch of a desk's grain was taken for the finger beside it; on clutter, things of every colour cross the ring).
 
 It fails with an :class:`~fingersplat3d.errors.InputError` when no ridge area stands out (a photo with no finger,
 or one too blurred to show ridges). Pure numpy/OpenCV.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import cv2
 import numpy as np
@@ -48,7 +54,7 @@ from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
 from ..structure_tensor import ridge_direction
-from .morphology import dilated, disc
+from .morphology import dilated, disc, outline
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 from .silhouette import outline_swell, widest_disc
 
@@ -120,6 +126,28 @@ from it is not the background's (:func:`_off_ring`): where a finger the frame cu
 MIN_CROSSING_SHARE = 0.05
 """The share of the border ring such pixels must hold for the crossing cut to be tried (a plain or a cluttered
 background holds next to none at that distance from its own colour)."""
+EDGE_GAIN = 2.0
+"""A cut's earlier piece replaces its later one where the photo's edges along the earlier one's outline are this many
+times stronger (:func:`_edge_support`): a later cut that took the finger's shaded half or its highlit band for
+background leaves an outline across the skin, where the photo has no edge (:func:`_best_supported`)."""
+HUE_DISTANCE = 0.08
+"""Two pixel sets have one hue where their median chromaticities (colour over its sum) lie this close. Measured: a
+synthetic finger's shaded half or highlit band against the rest of its skin 0.00 (one skin colour, shaded); coloured
+clutter (brown and navy shapes) beside a real grey finger 0.32. Skin's own hue varies by a few hundredths between its
+shade and a highlight; the margin is set between."""
+WEAK_EDGE_SHARE = 0.25
+"""A found mask whose outline's edges are weaker than this share of the photo's strongest (:func:`_on_no_edge`) is set
+beside the crossing cut. Measured: a patch of a bright desk taken for the finger beside it 0.02 of them; real fingers on
+in-focus clutter, masked right, 0.43 and 0.64 (their outline partly against things of the skin's grey)."""
+CROSSING_HELD = 0.5
+"""A mask that holds less than this share of the ring's pixels where something crosses it (:func:`_off_ring`, where
+they are :data:`MIN_CROSSING_SHARE` of the ring or more) is set beside the crossing cut: the finger crossing the frame
+left out, a patch of the background taken instead (:func:`_crossing_cut`)."""
+EDGE_PERCENTILE = 25.0
+"""The outline's edge support is this percentile of the edge strength along it: weak where a quarter of it or more runs
+across the skin (a finger cut at both ends and halved lengthwise has half its outline there)."""
+MIN_OUTLINE_PX = 20
+"""An outline with fewer pixels away from the border ring has no edge support to compare."""
 GRABCUT_ITERATIONS = 5
 EDGE_BLUR_PX = 2.0
 """The photo is blurred this much before the outline is put on its edge (:func:`_on_the_edge`): ridges fade, and a
@@ -421,15 +449,38 @@ def _off_ring(colour: np.ndarray, ring: np.ndarray) -> np.ndarray:
     return ring & (np.linalg.norm(colour - centre, axis=-1) > CROSSING_SPREADS * max(spread, _colour_floor(colour)))
 
 
-def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: float,
+class _Work(NamedTuple):
+    """The working copy of a photo: gray ``[H, W]`` and colour ``[H, W, 3]`` float32 in [0, 1], 8-bit colour for
+    GrabCut, the frame's border ring and its width, :func:`_edge_strength`, and the ring grown by two pixels (the
+    outline along its inner side is no edge of the photo)."""
+    gray: np.ndarray
+    colour: np.ndarray
+    colour8: np.ndarray
+    ring: np.ndarray
+    ring_width: int
+    strength: np.ndarray
+    near_ring: np.ndarray
+
+
+def _working_copy(small: np.ndarray) -> _Work:
+    """The :class:`_Work` of a photo already at the working size (``[H, W]`` or ``[H, W, 3]`` float32 in [0, 1])."""
+    height, width = small.shape[:2]
+    ring_width = max(2, int(RING_SHARE * max(height, width)))
+    colour = small if small.ndim == 3 else np.repeat(small[..., None], 3, axis=2)
+    colour8 = np.ascontiguousarray((colour * 255.0 + 0.5).astype(np.uint8))
+    ring = _ring((height, width), ring_width)
+    return _Work(_gray(small), colour, colour8, ring, ring_width, _edge_strength(colour), dilated(ring, 2))
+
+
+def _cut(work: _Work, evidence: np.ndarray, period: np.ndarray, reach_share: float,
          crossing: np.ndarray | None = None) -> np.ndarray:
     """The finger's mask at the working size from its ridge ``evidence`` and their ``period`` (steps 2-4 of the
-    module docstring); ``work``: the working copy's gray, colour, 8-bit colour, border ring and its width. An
+    module docstring); ``work``: the photo's working copy (:class:`_Work`). An
     InputError (naming nothing: the caller adds the image's name) where no piece shows ridges. ``crossing``: the ring's
     pixels where a finger crosses it (:func:`_off_ring`), probable finger instead of sure background, and no largest
     area of ridges taken for sure finger (the cut of a finger the frame cuts at both ends, once the others failed); the
     piece must then reach them."""
-    gray, colour, colour8, ring, ring_width = work
+    gray, colour, colour8, ring, ring_width = work.gray, work.colour, work.colour8, work.ring, work.ring_width
     pad = _pad(evidence) if crossing is None else None
     pad = _sure_finger(pad, period, colour) if pad is not None else None
     labels = np.where(ring, cv2.GC_BGD, cv2.GC_PR_FGD).astype(np.uint8)
@@ -452,7 +503,7 @@ def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: flo
     # (finger 1's real views on out-of-focus clutter: IoU 0.966 -> 0.996; with a distance per channel, blind to a
     # colour off the skin's own, it had made them worse, 0.72 -> 0.60; the brightness bound: the synthetic views on
     # in-focus clutter, worst IoU 0.67 -> 0.96)
-    skin = _piece_pad(piece, evidence, period, colour)
+    first, skin = piece, _piece_pad(piece, evidence, period, colour)
     if skin is not None:
         brightest = float(np.percentile(gray[skin], 99)) + _colour_floor(colour)
         labels[~ring] = cv2.GC_PR_FGD
@@ -461,7 +512,64 @@ def _cut(work: tuple, evidence: np.ndarray, period: np.ndarray, reach_share: flo
         labels[skin] = cv2.GC_FGD
         again = _ridged_piece(colour8, labels, evidence, least)
         piece = again if again is not None else piece
-    return _refined(colour8, piece, evidence, period, ring_width, reach_share)
+    last = _refined(colour8, piece, evidence, period, ring_width, reach_share)
+    return _best_supported((last, piece, first), work)
+
+
+def _edge_strength(colour: np.ndarray) -> np.ndarray:
+    """How strong an edge each pixel of the working copy lies on: the gradient's magnitude over the three channels of
+    the copy blurred by :data:`EDGE_BLUR_PX` (the ridges fade, an object's outline stays). ``[H, W]`` float32."""
+    smooth = cv2.GaussianBlur(colour, (0, 0), EDGE_BLUR_PX, borderType=cv2.BORDER_REPLICATE)
+    channels = [gradient_magnitude(np.ascontiguousarray(smooth[..., k])) for k in range(smooth.shape[-1])]
+    return np.sqrt(sum(channel * channel for channel in channels)).astype(np.float32)
+
+
+def _edge_support(mask: np.ndarray, work: _Work) -> float | None:
+    """The :data:`EDGE_PERCENTILE` of :func:`_edge_strength` along ``mask``'s outline away from the border ring (where
+    a finger the frame cuts has its outline on the ring's inner side, no edge of the photo); None where fewer than
+    :data:`MIN_OUTLINE_PX` outline pixels are left."""
+    rim = outline(mask) & ~work.near_ring
+    if np.count_nonzero(rim) < MIN_OUTLINE_PX:
+        return None
+    return float(np.percentile(work.strength[rim], EDGE_PERCENTILE))
+
+
+def _on_no_edge(mask: np.ndarray, work: _Work) -> bool:
+    """Whether ``mask``'s outline lies on no edge of the photo: its :func:`_edge_support` under
+    :data:`WEAK_EDGE_SHARE` of the photo's strongest edges (their 99th percentile)."""
+    support = _edge_support(mask, work)
+    return support is not None and support < WEAK_EDGE_SHARE * float(np.percentile(work.strength, 99))
+
+
+def _best_supported(masks: tuple[np.ndarray, ...], work: _Work, grown: bool = True) -> np.ndarray:
+    """The first of ``masks`` (a cut's last piece, then its earlier ones), unless an earlier one's outline lies on
+    edges :data:`EDGE_GAIN` times stronger (:func:`_edge_support`): each later cut drops what it takes for background,
+    and where it takes the finger's own shaded half or highlit band its outline runs across the skin. Only where what
+    the earlier one adds has the skin's hue (:func:`_same_hue`): on in-focus clutter, a piece holding coloured things
+    beside the finger has their strong edges for outline. ``grown``: False where the masks are not a cut's stages
+    (each earlier one the later grown) but rival cuts, taken by their edges alone.
+
+    Measured: a finger of another make cut to 0.9 widths on a bright desk, its darker half dropped by the last cut
+    (IoU 0.47; the outline's edges 0.04 against 1.08 for the piece before it, IoU 0.99), its lighter band by the
+    second (0.84; 0.14 against 0.98, 0.99); the masks of ``tools/bench_backgrounds.py`` as before but one view on
+    in-focus clutter mended (docs/measurements.md, stop 94)."""
+    best, best_support = masks[0], _edge_support(masks[0], work)
+    for mask in masks[1:]:
+        support = _edge_support(mask, work)
+        if (support is not None and (best_support is None or support >= EDGE_GAIN * best_support)
+                and (not grown or _same_hue(mask & ~best, best, work.colour))):
+            best, best_support = mask, support
+    return best
+
+
+def _same_hue(extra: np.ndarray, kept: np.ndarray, colour: np.ndarray) -> bool:
+    """Whether the pixels ``extra`` have the chromaticity of ``kept`` (each pixel's colour over its sum, medians within
+    :data:`HUE_DISTANCE`): the finger's shaded half is its own skin, darker; a thing beside it has its own hue. True
+    where either is empty."""
+    if not extra.any() or not kept.any():
+        return True
+    chroma = colour / np.maximum(colour.sum(axis=-1, keepdims=True), 1e-6)
+    return float(np.linalg.norm(np.median(chroma[extra], 0) - np.median(chroma[kept], 0))) <= HUE_DISTANCE
 
 
 def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None],
@@ -489,20 +597,29 @@ def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None]
     return again if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell else plain
 
 
-def _crossing_cut(work: tuple, evidence: tuple[np.ndarray, np.ndarray], cut: Callable) -> np.ndarray | None:
+def _crossing_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray], cut: Callable,
+                  found: np.ndarray | None = None) -> np.ndarray | None:
     """The finger's mask where it crosses the frame's border ring (a crop cut at both ends), or None: tried only where
-    :data:`MIN_CROSSING_SHARE` of the ring is off its own colour. Measured: a finger of another make cropped to 0.9
-    widths on a bright desk, its ridges fainter than the desk's grain (8 % of the finger over the ridge level against
-    22 % of the frame): no finger found by the other cuts (the largest area of ridges lay on the desk, and GrabCut
-    learned the skin crossing the ring as background); with this cut IoU 0.999 (docs/measurements.md, stop 93)."""
-    _, colour, _, ring, _ = work
-    crossing = _off_ring(colour, ring)
-    if crossing.sum() < MIN_CROSSING_SHARE * ring.sum():
+    :data:`MIN_CROSSING_SHARE` of the ring is off its own colour, and where the other cuts' mask ``found`` holds less
+    than :data:`CROSSING_HELD` of those pixels; None where it holds no more of them than ``found`` (the caller takes it
+    over ``found`` only where its outline lies on stronger edges, :func:`_best_supported`). Measured: a
+    finger of another make cropped to 0.9 widths on a bright desk, its ridges fainter than the desk's grain (8 % of the
+    finger over the ridge level against 22 % of the frame): no finger found by the other cuts (the largest area of
+    ridges lay on the desk, and GrabCut learned the skin crossing the ring as background); with this cut IoU 0.999
+    (docs/measurements.md, stop 93); another, whose other cuts took a patch of the desk beside it (IoU 0.00): 0.99
+    (stop 94)."""
+    crossing = _off_ring(work.colour, work.ring)
+    total = np.count_nonzero(crossing)
+    if total < MIN_CROSSING_SHARE * np.count_nonzero(work.ring):
+        return None
+    held = 0 if found is None else np.count_nonzero(found & crossing)
+    if held >= CROSSING_HELD * total:
         return None
     try:
-        return cut(evidence, RIDGE_REACH_SHARE, crossing)
+        crossed = cut(evidence, RIDGE_REACH_SHARE, crossing)
     except InputError:
         return None
+    return crossed if np.count_nonzero(crossed & crossing) > held else None
 
 
 def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.ndarray:
@@ -516,19 +633,14 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     top = float(np.percentile(small, 99.5))
     stretch = 1.0 / top if 0.0 < top < 0.5 else 1.0  # a dim exposure (16-bit data using the bottom of its range)
     small = np.clip(small * stretch, 0.0, 1.0)  # ... stretched before 8-bit GrabCut and the edge's contrast test
-    gray = _gray(small)
-    ring_width = max(2, int(RING_SHARE * max(size)))
-    colour = small if small.ndim == 3 else np.repeat(small[..., None], 3, axis=2)
-    colour8 = np.ascontiguousarray((colour * 255.0 + 0.5).astype(np.uint8))
-    ring = _ring(gray.shape, ring_width)
-    if ring.all():  # a strip thinner than two border rings: nothing inside them to be a finger
+    work = _working_copy(small)
+    if work.ring.all():  # a strip thinner than two border rings: nothing inside them to be a finger
         raise InputError(f"{name}: no finger found: the image is {width}x{height} pixels, too thin to hold one")
-    work = (gray, colour, colour8, ring, ring_width)
     full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
-    plain_evidence, repeated = _ridge_evidence(gray, _gray(full) if factor < 1.0 else None)
+    plain_evidence, repeated = _ridge_evidence(work.gray, _gray(full) if factor < 1.0 else None)
 
     def cut(evidence: tuple[np.ndarray, np.ndarray], reach: float, crossing: np.ndarray | None = None) -> np.ndarray:
-        return fill_holes(_to_border(_cut(work, *evidence, reach, crossing), ring_width))
+        return fill_holes(_to_border(_cut(work, *evidence, reach, crossing), work.ring_width))
 
     def cut_again() -> np.ndarray | None:
         try:
@@ -543,6 +655,9 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     finger = _chosen(plain, cut_again, repeated[0])
     if finger is None:  # a finger the frame cuts at both ends fills much of the ring GrabCut took as background
         finger = _crossing_cut(work, plain_evidence, cut)
+    elif _on_no_edge(finger, work):  # ... or left out where a patch of the background's own texture was taken for it
+        crossed = _crossing_cut(work, plain_evidence, cut, finger)
+        finger = finger if crossed is None else _best_supported((finger, crossed), work, grown=False)
     if finger is None:
         raise InputError(f"{name}: {problem}")
     if factor < 1.0:  # back to full size with a smooth edge
