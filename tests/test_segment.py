@@ -440,29 +440,31 @@ def test_an_earlier_piece_is_kept_where_its_outline_lies_on_the_photos_edges():
     assert not ab._same_hue(~truth & ~work.ring, truth, work.colour)
 
 
-def test_a_faint_finger_cut_at_both_ends_on_a_bright_desk(impose_dev):
-    """Found by tools/bench_stress.py (stop 93): another make's finger cropped to 0.9 widths on a bright desk, its
-    front view's ridges fainter than the desk's grain, had no finger found; measured IoU 0.999 since."""
+def _bench_textured():
+    """``tools/bench_textured.py`` as a module (its fingers of another make, backgrounds and crops)."""
     import sys
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
     try:
-        import bench_textured as bt
+        import bench_textured
     finally:
         sys.path.pop(0)
-    from fingersplat3d.experiments.backgrounds import background
+    return bench_textured
+
+
+def test_a_faint_finger_cut_at_both_ends_on_a_bright_desk(impose_dev):
+    """Found by tools/bench_stress.py (stop 93): another make's finger cropped to 0.9 widths on a bright desk, its
+    front view's ridges fainter than the desk's grain, had no finger found; measured IoU 0.999 since."""
     from fingersplat3d.experiments.textured_finger import random_finger, skin_texture, textured_capture
-    from fingersplat3d.scene import Capture
+
+    bt = _bench_textured()
 
     seed = 7877
     capture = textured_capture(random_finger(np.random.default_rng(seed)), skin_texture(impose_dev / "sample2_texture.png"),
                                size=(640, 512), ring_deg=[-28, 0], distance_mm=45.0, seed=seed)
     capture = bt._distorted(capture, -0.06)
-    scenes, skin = np.random.default_rng(seed + 1000), np.array(bt.SKIN_RGB, np.float32)
-    capture = Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
-                                                        background("bright desk", v.image.shape, scenes)))
-                            for v in capture.views), capture.metadata)
+    capture = bt._on_background(capture, "bright desk", seed)
     front = bt._cropped(capture, 0.9).views[1]
     assert mask_iou(finger_mask(front.image, name="front"), front.mask) > 0.98
 
@@ -472,23 +474,12 @@ def test_dark_fingers_cut_at_both_ends_on_a_bright_desk_masked_whole(impose_dev,
     """Found by a sweep of crops (stop 94): another make's finger cut to 0.9 widths on a bright desk, three views
     +-40 degrees at 54 mm; measured IoU before -> since: its shaded half dropped by the last cut 0.47 -> 1.00, its
     highlit band by the second 0.84 -> 1.00, a patch of the desk above it taken instead 0.00 -> 1.00."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    try:
-        import bench_textured as bt
-    finally:
-        sys.path.pop(0)
-    from fingersplat3d.experiments.backgrounds import background
     from fingersplat3d.experiments.textured_finger import random_finger, skin_texture, textured_capture
-    from fingersplat3d.scene import Capture
+
+    bt = _bench_textured()
 
     capture = textured_capture(random_finger(np.random.default_rng(seed)), skin_texture(impose_dev / "sample2_texture.png"),
                                size=(640, 512), ring_deg=[-40, 0, 40], distance_mm=54.0, seed=seed)
-    scenes, skin = np.random.default_rng(seed + 1000), np.array(bt.SKIN_RGB, np.float32)
-    capture = Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
-                                                        background("bright desk", v.image.shape, scenes)))
-                            for v in capture.views), capture.metadata)
+    capture = bt._on_background(capture, "bright desk", seed)
     cropped = bt._cropped(capture, 0.9).views[view]
     assert mask_iou(finger_mask(cropped.image, name="crop"), cropped.mask) > 0.95

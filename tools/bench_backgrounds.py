@@ -72,12 +72,9 @@ def _mask_rows(source: str, views, truths, stream: int) -> None:
 def _crop_rows(folder: Path, count: int, first_seed: int) -> None:
     """The ``--crops`` rows: masks of fingers cut at both ends on each background (see the module docstring)."""
     from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
-    from fingersplat3d.experiments.geometry import columns_cropped
     from fingersplat3d.experiments.real_crops import tipless_window
     from fingersplat3d.experiments.textured_finger import random_finger, skin_texture, textured_capture
-    from fingersplat3d.scene import Capture
     from fingersplat3d.segment.masks import finger_mask
-    from fingersplat3d.segment.silhouette import widest_disc
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_textured
@@ -99,19 +96,12 @@ def _crop_rows(folder: Path, count: int, first_seed: int) -> None:
                     masks.append(truths[k][windows[k]])
                 _iou_row(f"real dev views ({len(kept)}), {label}", kind, photos, masks)
     texture = skin_texture(bench_textured.DEFAULT_TEXTURE)
-    skin = np.array(bench_textured.SKIN_RGB, np.float32)
     for kind in BACKGROUNDS:
         photos, masks = [], []
         for seed in range(first_seed, first_seed + count):
             capture = textured_capture(random_finger(np.random.default_rng(seed)), texture, size=(640, 512),
                                        ring_deg=[-40, 0, 40], distance_mm=54.0, seed=seed)
-            scenes = np.random.default_rng(seed + 1000)
-            capture = Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
-                                                                background(kind, v.image.shape, scenes)))
-                                    for v in capture.views), capture.metadata)
-            front = capture.views[1]
-            centre, half = (front.width - 1) / 2.0, 0.45 * widest_disc(front.mask)
-            capture = columns_cropped(capture, int(np.ceil(centre - half)), int(np.floor(centre + half)))
+            capture = bench_textured._cropped(bench_textured._on_background(capture, kind, seed), 0.9)
             photos += [view.image for view in capture.views]
             masks += [view.mask for view in capture.views]
         _iou_row(f"another make, 640x512 ({len(photos)}: seeds {first_seed}-{first_seed + count - 1}), 0.9 widths",

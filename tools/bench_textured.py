@@ -55,6 +55,19 @@ def _cropped(capture, widths: float):
     return columns_cropped(capture, int(np.ceil(centre - half)), int(np.floor(centre + half)))
 
 
+def _on_background(capture, kind: str, seed: int):
+    """Every view's gray finger in a skin's colour (as a phone sees one) composited on a background of ``kind``, drawn
+    from ``seed`` + 1000 view after view; the true masks kept."""
+    from fingersplat3d.experiments.backgrounds import background, on_background
+    from fingersplat3d.scene import Capture
+
+    scenes = np.random.default_rng(seed + 1000)
+    skin = np.array(SKIN_RGB, np.float32)
+    return Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
+                                                     background(kind, v.image.shape, scenes)))
+                         for v in capture.views), capture.metadata)
+
+
 def _distorted(capture, k1: float):
     """Every view as seen through a lens with radial distortion ``x_d = x_u (1 + k1 r_u^2)`` (``r`` in units of the
     focal from the principal point; k1 < 0 barrel): images resampled bilinearly, masks and depth by the nearest pixel
@@ -84,7 +97,7 @@ def main() -> int:
     from fingersplat3d.errors import InputError
     from fingersplat3d.experiments.geometry import score_geometry
     from fingersplat3d.eval.machine import machine
-    from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
+    from fingersplat3d.experiments.backgrounds import BACKGROUNDS
     from fingersplat3d.experiments.textured_finger import (DISTANCE_MM, FIELD_MM, random_finger, skin_texture,
                                                            textured_capture)
     from fingersplat3d.pipeline import FuseConfig, fuse
@@ -150,11 +163,7 @@ def main() -> int:
         if args.k1:
             capture = _distorted(capture, args.k1)
         if args.background is not None:
-            scenes = np.random.default_rng(seed + 1000)
-            skin = np.array(SKIN_RGB, np.float32)  # the gray texture in a skin's colour, as a phone sees a finger
-            capture = Capture(tuple(v.with_(image=on_background(np.clip(v.image[..., None] * skin, 0, 1), v.mask,
-                                                                background(args.background, v.image.shape, scenes)))
-                                    for v in capture.views), capture.metadata)
+            capture = _on_background(capture, args.background, seed)
         if args.crop is not None:
             capture = _cropped(capture, args.crop)
         truth = {view.name: view for view in capture.views}
