@@ -388,34 +388,33 @@ def _crossing_finger(h: int = 512, w: int = 256, seed: int = 0) -> tuple[np.ndar
     return on_background(np.clip(skin, 0, 1).astype(np.float32), mask, bright_desk((h, w, 3), rng)), mask
 
 
-def test_the_crossing_cut_finds_a_finger_the_frame_cuts_at_both_ends_and_nothing_on_a_plain_desk():
+def test_the_crossing_cut_finds_a_finger_the_frame_cuts_at_both_ends_and_nothing_on_a_plain_desk(monkeypatch):
     """The last resort of any_background (stop 93): the ring's pixels off its own colour taken as probable finger."""
     from fingersplat3d.segment import any_background as ab
-
-    def cut(evidence, reach, crossing=None, *, at):
-        return ab.fill_holes(ab._to_border(ab._cut(at, *evidence, reach, crossing), at.ring_width))
 
     image, truth = _crossing_finger()
     here = ab._working_copy(image)
     evidence, _ = ab._ridge_evidence(here.gray)
-    found = ab._crossing_cut(here, evidence, lambda e, r, c: cut(e, r, c, at=here))
+    found = ab._crossing_cut(here, evidence)
     assert found is not None and mask_iou(found, truth) > 0.97
     assert ab._off_ring(image, here.ring).sum() > ab.MIN_CROSSING_SHARE * here.ring.sum()
     desk = (0.8 + 0.02 * np.random.default_rng(1).normal(size=(256, 320, 3))).clip(0, 1).astype(np.float32)
     plain = ab._working_copy(desk)
-    assert ab._crossing_cut(plain, ab._ridge_evidence(plain.gray)[0], lambda e, r, c: cut(e, r, c, at=plain)) is None
+    assert ab._crossing_cut(plain, ab._ridge_evidence(plain.gray)[0]) is None
     # where the other cuts found a mask: tried only where it holds under half of the crossing, taken where it holds more
     patch = np.zeros_like(truth)
     patch[:100, 60:200] = True  # a patch of the desk above the finger
     calls = []
+    framed_cut = ab._framed_cut
 
-    def counted(e, r, c):
+    def counted(*args):
         calls.append(1)
-        return cut(e, r, c, at=here)
+        return framed_cut(*args)
 
-    crossed = ab._crossing_cut(here, evidence, counted, patch)
+    monkeypatch.setattr(ab, "_framed_cut", counted)
+    crossed = ab._crossing_cut(here, evidence, patch)
     assert crossed is not None and mask_iou(crossed, truth) > 0.97 and len(calls) == 1
-    assert ab._crossing_cut(here, evidence, counted, truth) is None and len(calls) == 1  # the finger: not tried
+    assert ab._crossing_cut(here, evidence, truth) is None and len(calls) == 1  # the finger: not tried
 
 
 def test_an_earlier_piece_is_kept_where_its_outline_lies_on_the_photos_edges():

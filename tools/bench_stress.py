@@ -21,6 +21,7 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from bench_textured import _size
 from fingersplat3d.errors import run_script
 
 TEXTURED = Path(__file__).resolve().with_name("bench_textured.py")
@@ -57,9 +58,10 @@ def main() -> int:
     args = parser.parse_args()
     if not 1 <= args.count <= 1000 or not 1 <= args.fingers <= 20 or not 1 <= args.jobs <= 16:
         raise InputError("--count must lie in 1..1000, --fingers in 1..20 and --jobs in 1..16")
-    sides = args.size.lower().split("x")
-    if len(sides) != 2 or not all(side.isdigit() and int(side) >= 64 for side in sides):
-        raise InputError(f"--size {args.size!r}: give it as WIDTHxHEIGHT, at least 64 px a side, e.g. 640x512")
+    try:
+        _size(args.size)  # bench_textured.py's own reading of it, before any fuse runs
+    except argparse.ArgumentTypeError as error:
+        raise InputError(f"--size {error}") from None
     settings = draw_settings(args.seed, args.count)
     with tempfile.TemporaryDirectory() as scratch, ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = [pool.submit(_run, s, args.fingers, args.size, args.jobs, Path(scratch), i) for i, s in enumerate(settings)]

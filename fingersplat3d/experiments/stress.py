@@ -29,6 +29,8 @@ DEPTH_TARGET_MM = 0.15
 KINDS = ("3 or 5 views", "2 views, focal given", "2 views, focal fitted")
 """The kinds of capture a sweep is read by: two views cannot fix the focal (README, known limits)."""
 BACKGROUNDS = ("bright desk", "out-of-focus clutter")
+"""The phone backgrounds a sweep draws (of :data:`~fingersplat3d.experiments.backgrounds.BACKGROUNDS`, whose in-focus
+clutter, sharper than a phone's close focus leaves a room behind a finger, stays ``tools/bench_backgrounds.py``'s)."""
 
 
 @dataclass(frozen=True)

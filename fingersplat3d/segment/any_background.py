@@ -597,7 +597,14 @@ def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None]
     return again if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell else plain
 
 
-def _crossing_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray], cut: Callable,
+def _framed_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray], reach: float,
+                crossing: np.ndarray | None = None) -> np.ndarray:
+    """:func:`_cut` from ``evidence`` (the ridge score and its period) carried out across the border ring where it
+    reaches it, holes filled (steps 2-5 of the module docstring)."""
+    return fill_holes(_to_border(_cut(work, *evidence, reach, crossing), work.ring_width))
+
+
+def _crossing_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray],
                   found: np.ndarray | None = None) -> np.ndarray | None:
     """The finger's mask where it crosses the frame's border ring (a crop cut at both ends), or None: tried only where
     :data:`MIN_CROSSING_SHARE` of the ring is off its own colour, and where the other cuts' mask ``found`` holds less
@@ -616,7 +623,7 @@ def _crossing_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray], cut: Cal
     if held >= CROSSING_HELD * total:
         return None
     try:
-        crossed = cut(evidence, RIDGE_REACH_SHARE, crossing)
+        crossed = _framed_cut(work, evidence, RIDGE_REACH_SHARE, crossing)
     except InputError:
         return None
     return crossed if np.count_nonzero(crossed & crossing) > held else None
@@ -639,24 +646,21 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     full = np.clip(np.asarray(image, np.float32) * stretch, 0.0, 1.0)
     plain_evidence, repeated = _ridge_evidence(work.gray, _gray(full) if factor < 1.0 else None)
 
-    def cut(evidence: tuple[np.ndarray, np.ndarray], reach: float, crossing: np.ndarray | None = None) -> np.ndarray:
-        return fill_holes(_to_border(_cut(work, *evidence, reach, crossing), work.ring_width))
-
     def cut_again() -> np.ndarray | None:
         try:
-            return cut(repeated, REPEATED_REACH_SHARE)
+            return _framed_cut(work, repeated, REPEATED_REACH_SHARE)
         except InputError:
             return None
 
     try:
-        plain, problem = cut(plain_evidence, RIDGE_REACH_SHARE), None
+        plain, problem = _framed_cut(work, plain_evidence, RIDGE_REACH_SHARE), None
     except InputError as error:
         plain, problem = None, error
     finger = _chosen(plain, cut_again, repeated[0])
     if finger is None:  # a finger the frame cuts at both ends fills much of the ring GrabCut took as background
-        finger = _crossing_cut(work, plain_evidence, cut)
+        finger = _crossing_cut(work, plain_evidence)
     elif _on_no_edge(finger, work):  # ... or left out where a patch of the background's own texture was taken for it
-        crossed = _crossing_cut(work, plain_evidence, cut, finger)
+        crossed = _crossing_cut(work, plain_evidence, finger)
         finger = finger if crossed is None else _best_supported((finger, crossed), work, grown=False)
     if finger is None:
         raise InputError(f"{name}: {problem}")
