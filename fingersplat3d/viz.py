@@ -4,6 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .align.transfer import backing_on
 from .io.depth import depth_colormap
 from .sampling import resized_image
 from .scene import Capture
@@ -107,7 +108,7 @@ def _view_tile(image: np.ndarray, backing: np.ndarray | None) -> np.ndarray:
         cv2.rectangle(tile, (0, 0), (tile.shape[1] - 1, tile.shape[0] - 1), _NOT_PLACED, 6)
         return tile
     tinted = tile.astype(np.float64)
-    backing = cv2.resize(backing, size, interpolation=cv2.INTER_NEAREST)
+    backing = backing_on(backing, (size[1], size[0]))
     for value, colour in ((1, _BACKED), (0, _ONE_VIEW)):
         tinted[backing == value] = 0.55 * tinted[backing == value] + 0.45 * colour
     return tinted.astype(np.uint8)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fingersplat3d.eval.depth import DepthErrors, align_scale, align_scale_shift, depth_errors
+from fingersplat3d.eval.depth import DepthErrors, align_scale, align_scale_shift, depth_errors, errors_by_backing
 from fingersplat3d.eval.poses import (relative_rotation_errors, rotation_angle_deg, translation_direction_errors,
                                       vector_angle_deg, view_pairs, view_turn_deg)
 from fingersplat3d.scene import look_at
@@ -88,6 +88,24 @@ def test_depth_errors_refuse_bad_input():
         depth_errors(gt, gt, align="affine")
     with pytest.raises(ValueError, match="mask"):
         depth_errors(gt, gt, mask=np.ones((3, 3), bool))
+
+
+def test_errors_split_by_a_second_views_backing_count_each_scored_pixel_once():
+    from fingersplat3d.align.transfer import backing_on
+
+    error = np.array([[1.0, 2.0, 3.0, np.nan], [4.0, 5.0, 6.0, 7.0]])
+    backing = np.array([[1, 1, 0, 1], [0, -1, 0, 1]], np.int8)  # -1: no surface, in neither part
+    split = errors_by_backing(error, backing)
+    assert split.mae_two_views == pytest.approx((1 + 2 + 7) / 3) and split.mae_one_view == pytest.approx((3 + 4 + 6) / 3)
+    assert split.share_two_views == pytest.approx(3 / 6)  # the NaN error and the -1 cell count nowhere
+    alone = errors_by_backing(error, np.zeros_like(backing))  # a single photo: nothing backed
+    assert alone.share_two_views == 0 and np.isnan(alone.mae_two_views) and np.isfinite(alone.mae_one_view)
+    with pytest.raises(ValueError, match="shape"):
+        errors_by_backing(error, backing[:, :3])
+    # A map at a stride, on a finer grid: every cell becomes a block of its own value, nothing else appears.
+    fine = backing_on(backing, (8, 16))
+    assert fine.shape == (8, 16) and fine.dtype == np.int8 and set(np.unique(fine)) == {-1, 0, 1}
+    assert (fine[::4, ::4] == backing).all() and (fine[4:8, 4:8] == -1).all()
 
 
 def test_constant_prediction_is_scored_by_the_spread_of_the_truth():

@@ -89,7 +89,14 @@ def test_capture_folders_are_scored_view_by_view(small_capture, tmp_path):
         assert np.isfinite([float(row[k]) for k in ("mae_scale", "mae_weighted", "rmse_scale_shift")]).all()
         assert (out / "error_maps" / f"finger__{row['name'].split('/')[1]}.png").is_file()
     assert 0 < max(ratios) < 0.85 and np.median(ratios) < 0.4
-    assert "Cui et al." in (out / "summary.md").read_text()
+    # Split by a second view's backing: the skin two views see is most of each view, and measured from the photos
+    # it is truer than the skin one view alone sees, whose depth is the pointmap's guess.
+    shares = [float(r["share_two_views"]) for r in rows]
+    assert all(0.5 < share <= 1.0 for share in shares)
+    two, one = (np.nanmean([float(r[k]) for r in rows]) for k in ("mae_two_views", "mae_one_view"))
+    assert 0 < two < one
+    summary = (out / "summary.md").read_text()
+    assert "Cui et al." in summary and "the skin two views see" in summary
 
 
 def test_polyu_mode_scores_images_against_height_maps(small_capture, tmp_path):
@@ -113,6 +120,9 @@ def test_polyu_mode_scores_images_against_height_maps(small_capture, tmp_path):
     sample = rows["sample1"]
     assert sample["status"] == "done" and 0 < float(sample["mae_scale_shift"]) < 1.0
     assert float(sample["scale"]) > 0  # heights rise toward the camera: depth = -height
+    # One photo (monocular mode): no second view backs anything, so its whole error is the guess's.
+    assert float(sample["share_two_views"]) == 0 and np.isnan(float(sample["mae_two_views"]))
+    assert float(sample["mae_one_view"]) == pytest.approx(float(sample["mae_scale_shift"]), rel=0.05)
     summary = (out / "summary.md").read_text()
     assert "nomap.png" in summary and "1 image(s) without a height map" in summary
 

@@ -126,3 +126,7 @@ def test_another_makes_finger_is_fused_from_its_photos_alone(labyrinth_file):
     scores = score_geometry(fuse(blind, FuseConfig(splat=None)), {v.name: v for v in capture.views})
     assert scores["registered_all"]
     assert scores["rotation_max_deg"] < 1.0 and scores["depth_mae_mm"] < 0.3
+    # Split by a second view's backing: the skin two views see is measured from the photos and truer than the skin one
+    # view alone sees, whose depth is the pointmap's guess; the whole view's figure lies between the two.
+    two, one = scores["depth_two_views_mm"], scores["depth_one_view_mm"]
+    assert 0 < two < scores["depth_mae_mm"] < one

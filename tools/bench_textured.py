@@ -205,14 +205,15 @@ def main() -> int:
           f"{f', lens distortion k1 {args.k1:g}' if args.k1 else ''}"
           f"{f', {args.nearer:g} mm nearer the front camera' if args.nearer else ''}"
           f"{f', ridges {args.relief:g} mm high' if args.relief else ''}{f', highlight {args.specular:g}' if args.specular else ''}.\n")
-    print("| seed | all registered | rotation median (max) ° | depth MAE (worst view) mm | focal error | warned | s |\n"
-          "|---|---|---|---|---|---|---|")
+    print("| seed | all registered | rotation median (max) ° | depth MAE (worst view) mm | skin two views see / one view "
+          "alone sees mm | focal error | warned | s |\n|---|---|---|---|---|---|---|---|")
     for r in rows:
         if r["status"] != "done":
-            print(f"| {r['seed']} | failed: {r['reason']} | | | | | |")
+            print(f"| {r['seed']} | failed: {r['reason']} | | | | | | |")
             continue
         print(f"| {r['seed']} | {'yes' if r['registered_all'] else 'no'} | {r['rotation_error_deg']:.2f} "
               f"({r['rotation_max_deg']:.2f}) | {r['depth_mae_mm']:.3f} ({r['depth_worst_view_mm']:.3f}) | "
+              f"{r['depth_two_views_mm']:.3f} / {r['depth_one_view_mm']:.3f} | "
               f"{100 * r['focal_error']:+.1f} % | {'yes' if r['warned'] else 'no'} | {r['seconds']:.1f} |")
     if done:
         print(f"| **median** | {sum(r['registered_all'] for r in done)}/{len(rows)} | "
@@ -220,6 +221,8 @@ def main() -> int:
               f"({max(r['rotation_max_deg'] for r in done):.2f}) | "
               f"**{np.median([r['depth_mae_mm'] for r in done]):.3f}** "
               f"({max(r['depth_worst_view_mm'] for r in done):.3f}) | "
+              f"{np.nanmedian([r['depth_two_views_mm'] for r in done]):.3f} / "
+              f"{np.nanmedian([r['depth_one_view_mm'] for r in done]):.3f} | "
               f"{100 * np.median([abs(r['focal_error']) for r in done]):.1f} % (abs) | "
               f"{sum(r['warned'] for r in done)} | |")
     if args.json:

@@ -22,7 +22,7 @@ from ..sampling import sample_nearest
 from ..scene import Camera
 
 __all__ = ["STATUSES", "MIN_PARALLAX_DEG", "distinct_viewpoints", "transfer_points", "warp_image", "surface_tolerance", "multi_view_backing", "backed_shares",
-           "multi_view_support"]
+           "backing_on", "multi_view_support"]
 
 STATUSES = ("mapped", "off_surface", "outside", "hidden")
 TOLERANCE_FRACTION = 0.02
@@ -151,6 +151,12 @@ def backed_shares(backing: list[np.ndarray | None]) -> list[float | None]:
         surface = None if view is None else view[view >= 0]
         shares.append(None if view is None else float(surface.mean()) if surface.size else 0.0)
     return shares
+
+
+def backing_on(backing: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A :func:`multi_view_backing` map (any stride) on a grid of ``shape`` (rows, cols) covering the same image, by
+    the nearest of its cells: int8, ``1`` backed by a second view, ``0`` seen by this view alone, ``-1`` no surface."""
+    return cv2.resize(np.asarray(backing, np.int8), (int(shape[1]), int(shape[0])), interpolation=cv2.INTER_NEAREST)
 
 
 def multi_view_support(depths: list[np.ndarray], cameras: list[Camera], aligned: list[bool],

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ALIGNMENTS", "DepthErrors", "align_scale_shift", "align_scale", "depth_errors"]
+__all__ = ["ALIGNMENTS", "DepthErrors", "BackedErrors", "align_scale_shift", "align_scale", "depth_errors",
+           "errors_by_backing", "split_by_backing"]
 
 ALIGNMENTS = ("scale_shift", "scale", "none")
 
@@ -150,3 +151,40 @@ def depth_errors(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = Non
         shift=shift,
         weighted=weights is not None,
     )
+
+
+@dataclass(frozen=True)
+class BackedErrors:
+    """Mean absolute errors split by where a second view backs the surface (NaN where a part has no pixel)."""
+
+    share_two_views: float  # of the scored pixels, the share a second view backs
+    mae_two_views: float  # over the skin a second view backs: its depth measured from the photos
+    mae_one_view: float  # over the skin this view alone sees: its depth the pointmap's guess
+
+
+def errors_by_backing(error: np.ndarray, backing: np.ndarray) -> BackedErrors:
+    """The absolute errors ``error [H, W]`` (NaN where not scored, e.g. ``|scale * pred + shift - gt|``) split by
+    ``backing [H, W]`` (``1`` backed by a second view, ``0`` seen by one view alone, ``-1`` no surface: those pixels
+    count in neither part). Raises ``ValueError`` when the shapes differ."""
+    error = np.asarray(error, np.float64)
+    backing = np.asarray(backing)
+    if error.shape != backing.shape:
+        raise ValueError(f"error map has shape {error.shape} but backing map has shape {backing.shape}")
+    scored = np.isfinite(error)
+    two, one = scored & (backing == 1), scored & (backing == 0)
+    counted = int(two.sum() + one.sum())
+    mean = lambda part: float(error[part].mean()) if part.any() else float("nan")  # noqa: E731
+    return BackedErrors(float(two.sum()) / counted if counted else float("nan"), mean(two), mean(one))
+
+
+def split_by_backing(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None, fit: DepthErrors,
+                     backing: np.ndarray) -> BackedErrors:
+    """:func:`errors_by_backing` of ``pred`` aligned to ``gt`` as ``fit`` (:func:`depth_errors`' scale and shift over
+    the whole view) inside ``mask`` (None: everywhere), ``backing`` a
+    :func:`~fingersplat3d.align.transfer.multi_view_backing` map at any stride over the same image."""
+    from ..align.transfer import backing_on
+
+    error = np.abs(fit.scale * np.asarray(pred, np.float64) + fit.shift - np.asarray(gt, np.float64))
+    if mask is not None:
+        error = np.where(np.asarray(mask, bool), error, np.nan)
+    return errors_by_backing(error, backing_on(backing, error.shape))

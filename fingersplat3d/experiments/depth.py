@@ -11,7 +11,10 @@ Cases come from two sources:
 
 The metric is :func:`fingersplat3d.eval.depth_errors` inside the ground truth's valid pixels (and
 the capture's mask): mean absolute error after a least-squares scale + shift and after a scale
-only, and a confidence-weighted variant (the reconstruction's per-pixel confidence as weights).
+only, and a confidence-weighted variant (the reconstruction's per-pixel confidence as weights). The scale + shift
+error is also split by where a second view backs the view's surface (``report.json``'s ``backed_by_two_views``, pixel
+by pixel: :func:`~fingersplat3d.eval.depth.split_by_backing`): the skin whose depth the photos measured, and the skin
+this view alone sees, whose depth is the pointmap's guess held to the other views' outlines.
 Units are the ground truth's. Results: ``depth_errors.csv`` (one row per image or view, failures
 included with their reason), ``summary.md`` and ``error_maps/<name>.png``.
 """
@@ -25,6 +28,7 @@ import numpy as np
 
 from ..errors import FS3DError, InputError
 from ..eval import depth_errors
+from ..eval.depth import split_by_backing
 from ..io.depth import depth_colormap
 from ..io.images import IMAGE_SUFFIXES, find_files
 from .tables import write_rows
@@ -35,7 +39,7 @@ PAPER_FIGURES = {"Cui et al.": 2.9577, "FingerSplat": 1.7876}
 """The paper's "weighted depth error" on PolyU 3D+ (mm). Its weighting is not defined there, so the
 figures here are beside them, not comparable digit for digit."""
 COLUMNS = ("name", "status", "reason", "pixels", "coverage", "mae_scale_shift", "mae_scale", "mae_weighted",
-           "rmse_scale_shift", "median_scale_shift", "scale")
+           "rmse_scale_shift", "median_scale_shift", "scale", "share_two_views", "mae_two_views", "mae_one_view")
 
 
 @dataclass(frozen=True)
@@ -115,7 +119,9 @@ def _on_grid(pred: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
 
 
 def _score(name: str, pred: np.ndarray, confidence: np.ndarray, truth: np.ndarray, mask: np.ndarray | None,
-           maps: Path) -> dict:
+           maps: Path, backing: np.ndarray | None = None) -> dict:
+    """One view's row; ``backing``: its :func:`~fingersplat3d.align.transfer.multi_view_backing` map (any stride), None
+    where it was not placed (the split's cells then empty)."""
     pred = _on_grid(np.asarray(pred, np.float64), truth.shape, name)
     confidence = _on_grid(np.asarray(confidence, np.float64), truth.shape, name)
     weights = np.where(np.isfinite(confidence), np.clip(confidence, 0.0, None), 0.0)
@@ -130,9 +136,14 @@ def _score(name: str, pred: np.ndarray, confidence: np.ndarray, truth: np.ndarra
     picture = depth_colormap(np.where(np.isfinite(error), error, np.nan))
     path = maps / (name.replace("/", "__") + ".png")
     cv2.imwrite(str(path), picture[..., ::-1])
-    return {"name": name, "status": "done", "reason": "", "pixels": shifted.n, "coverage": round(shifted.coverage, 4),
-            "mae_scale_shift": shifted.mae, "mae_scale": scaled.mae, "mae_weighted": weighted.mae,
-            "rmse_scale_shift": shifted.rmse, "median_scale_shift": shifted.median_abs, "scale": shifted.scale}
+    row = {"name": name, "status": "done", "reason": "", "pixels": shifted.n, "coverage": round(shifted.coverage, 4),
+           "mae_scale_shift": shifted.mae, "mae_scale": scaled.mae, "mae_weighted": weighted.mae,
+           "rmse_scale_shift": shifted.rmse, "median_scale_shift": shifted.median_abs, "scale": shifted.scale}
+    if backing is not None:
+        split = split_by_backing(pred, truth, mask, shifted, backing)
+        row.update(share_two_views=round(split.share_two_views, 4), mae_two_views=split.mae_two_views,
+                   mae_one_view=split.mae_one_view)
+    return row
 
 
 def _evaluate(case: DepthCase, config, maps: Path) -> list[dict]:
@@ -148,7 +159,8 @@ def _evaluate(case: DepthCase, config, maps: Path) -> list[dict]:
     rows = []
     for index, (name, truth, mask) in enumerate(truths):
         view = index if case.truth is None else 0
-        rows.append(_score(name, result.depths[view], result.confidences[view], truth, mask, maps))
+        backing = result.backing[view] if result.backing is not None else None
+        rows.append(_score(name, result.depths[view], result.confidences[view], truth, mask, maps, backing))
     return rows
 
 
@@ -182,6 +194,7 @@ def summary_markdown(rows: list[dict], unpaired: tuple[list[Path], list[Path]] =
         for label, reduce in (("mean", np.mean), ("median", np.median)):
             values = [reduce([r[k] for r in done]) for k in ("mae_scale_shift", "mae_scale", "mae_weighted")]
             lines.append(f"| {label} MAE | " + " | ".join(f"{v:.4f}" for v in values) + " |")
+        lines += ["", _backed_line(done)]
         lines += ["", "The paper's weighted depth error on PolyU 3D+: " + ", ".join(
             f"{k} {v} mm" for k, v in PAPER_FIGURES.items()) + ". Its weighting is not defined there; the "
             "confidence-weighted column is this tool's reading of it, so compare orders of magnitude, not digits."]
@@ -193,3 +206,22 @@ def summary_markdown(rows: list[dict], unpaired: tuple[list[Path], list[Path]] =
         lines += ["", f"Unpaired: {len(images)} image(s) without a height map, {len(truths)} height map(s) without an image.", ""]
         lines += [f"- image {p}" for p in images] + [f"- height map {p}" for p in truths]
     return "\n".join(lines) + "\n"
+
+
+def _backed_line(done: list[dict]) -> str:
+    """The summary's sentence on the error split by a second view's backing (means over the views that have each
+    part)."""
+    def mean_of(key: str) -> float:
+        values = [float(r[key]) for r in done if r.get(key, "") != "" and np.isfinite(float(r[key]))]
+        return float(np.mean(values)) if values else float("nan")
+
+    share, two, one = mean_of("share_two_views"), mean_of("mae_two_views"), mean_of("mae_one_view")
+    if not np.isfinite(share):
+        return "No view was placed, so the error is not split by a second view's backing."
+    if not np.isfinite(two):
+        return (f"No second view backs any scored pixel (a single photo: its depth is the pointmap's guess); MAE "
+                f"after scale + shift {one:.4f}.")
+    return (f"Split by where a second view backs the surface (mean over the views): the skin two views see, "
+            f"{100 * share:.0f} % of the scored pixels, MAE after scale + shift {two:.4f}; the skin one view alone sees "
+            f"(its depth the pointmap's guess held to the other views' outlines) "
+            + ("none." if not np.isfinite(one) else f"{one:.4f}."))

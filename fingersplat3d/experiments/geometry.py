@@ -112,15 +112,32 @@ def score_geometry(result, truth: dict) -> dict:
     names = list(truth)
     rotations = relative_rotation_errors([c.world_to_cam for c in result.cameras],
                                          [truth[n].camera.world_to_cam for n in names])
-    depths = [depth_errors(d, truth[n].depth, truth[n].mask).mae for n, d in zip(names, result.depths)]
+    errors = [depth_errors(d, truth[n].depth, truth[n].mask) for n, d in zip(names, result.depths)]
+    depths = [e.mae for e in errors]
+    two, one = _backed_depth(result, truth, names, errors)
     return {"rotation_error_deg": float(np.median(rotations)), "rotation_mean_deg": float(np.mean(rotations)),
             "rotation_max_deg": float(np.max(rotations)),
             "depth_mae_mm": float(np.mean(depths)), "depth_worst_view_mm": float(np.max(depths)),
+            "depth_two_views_mm": two, "depth_one_view_mm": one,
             "registered_all": bool(all(result.report["alignment"]["aligned"].values())),
             "turn_uncertainty_max_deg": max(result.report["alignment"].get("turn_uncertainty_deg", {}).values(),
                                             default=float("nan")),
             "turn_sensitivity_max_deg": max(result.report["alignment"].get("turn_sensitivity_deg", {}).values(),
                                             default=float("nan"))}
+
+
+def _backed_depth(result, truth: dict, names: list[str], errors: list) -> tuple[float, float]:
+    """The whole-view depth error split by where a second view backs each view's surface
+    (:func:`~fingersplat3d.eval.depth.split_by_backing`, on each view's own scale and shift): the means over the
+    views of the skin two views see and of the skin one view alone sees (NaN where no view has that part)."""
+    from ..eval.depth import split_by_backing
+
+    parts = [split_by_backing(result.depths[index], truth[name].depth, truth[name].mask, error, result.backing[index])
+             for index, (name, error) in enumerate(zip(names, errors))
+             if result.backing is not None and result.backing[index] is not None]
+    mean = lambda values: float(np.mean(values)) if values else float("nan")  # noqa: E731
+    return (mean([p.mae_two_views for p in parts if np.isfinite(p.mae_two_views)]),
+            mean([p.mae_one_view for p in parts if np.isfinite(p.mae_one_view)]))
 
 
 def synth_captures(seeds: list[int], folder: Path, size: tuple[int, int], rig: str,
