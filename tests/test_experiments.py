@@ -66,10 +66,11 @@ def test_a_zoomed_case_frames_the_finger_larger(tmp_path):
 def test_geometry_table_gives_medians_and_worst_and_keeps_failed_cases():
     rows = [{"case": "ring 3 views 640x512", "status": "done", "registered_all": True, "rotation_error_deg": e,
              "rotation_max_deg": 2 * e, "depth_mae_mm": 0.1 * e, "depth_worst_view_mm": 0.2 * e, "wall_s": 5.0,
+             "depth_two_views_mm": 0.05 * e, "depth_one_view_mm": 0.3 * e if e < 4 else float("nan"),
              "peak_rss_mb": 900.0} for e in (1.0, 2.0, 4.0)]
     rows.append({"case": "cfpose 5 views 512x640", "status": "failed", "reason": "boom"})
     table = geometry_table(rows).splitlines()
-    assert "| ring 3 views 640x512 | 3 | 3 | 2.00 (8.00) | 0.200 (0.800) |" in table[2]
+    assert "| ring 3 views 640x512 | 3 | 3 | 2.00 (8.00) | 0.200 (0.800) | 0.100 / 0.450 |" in table[2]  # NaN: no such skin
     assert table[3].startswith("| cfpose 5 views 512x640 | 1 | 0 (failed)")
 
 

@@ -213,19 +213,24 @@ def run_geometry(cases: list[GeometryCase], seeds: list[int], config=None, progr
 
 
 def geometry_table(rows: list[dict]) -> str:
-    """A markdown table: per case, medians over seeds (worst in brackets)."""
-    lines = ["| case | seeds | all views registered | rotation error ° (max) | depth MAE mm (worst view) | wall s | peak RSS MB |",
-             "|---|---|---|---|---|---|---|"]
+    """A markdown table: per case, medians over seeds (worst in brackets); the depth also split by where a second view
+    backs each view's surface (:func:`score_geometry`'s ``depth_two_views_mm``, ``depth_one_view_mm``)."""
+    lines = ["| case | seeds | all views registered | rotation error ° (max) | depth MAE mm (worst view) | skin two views see / "
+             "one view alone sees mm | wall s | peak RSS MB |", "|---|---|---|---|---|---|---|---|"]
     for label in dict.fromkeys(r["case"] for r in rows):
         mine = [r for r in rows if r["case"] == label]
         done = [r for r in mine if r["status"] == "done"]
         if not done:
-            lines.append(f"| {label} | {len(mine)} | 0 (failed) | | | | |")
+            lines.append(f"| {label} | {len(mine)} | 0 (failed) | | | | | |")
             continue
         median = lambda key: float(np.median([r[key] for r in done]))  # noqa: E731
         worst = lambda key: float(np.max([r[key] for r in done]))  # noqa: E731
+        def split(key: str) -> float:  # NaN: no view of the case had such skin
+            values = [r[key] for r in done if np.isfinite(r.get(key, np.nan))]
+            return float(np.median(values)) if values else float("nan")
         lines.append(f"| {label} | {len(mine)} | {sum(r['registered_all'] for r in done)} | "
                      f"{median('rotation_error_deg'):.2f} ({worst('rotation_max_deg'):.2f}) | "
-                     f"{median('depth_mae_mm'):.3f} ({worst('depth_worst_view_mm'):.3f}) | {median('wall_s'):.1f} | "
+                     f"{median('depth_mae_mm'):.3f} ({worst('depth_worst_view_mm'):.3f}) | "
+                     f"{split('depth_two_views_mm'):.3f} / {split('depth_one_view_mm'):.3f} | {median('wall_s'):.1f} | "
                      f"{worst('peak_rss_mb'):.0f} |")
     return "\n".join(lines)
