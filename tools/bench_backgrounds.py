@@ -110,7 +110,6 @@ def _crop_rows(folder: Path, count: int, first_seed: int) -> None:
 
 def _iou_row(source: str, kind: str, photos: list, truths: list) -> None:
     """One row of the ``--crops`` table: each photo masked alone against its true mask."""
-    from fingersplat3d.errors import InputError
     from fingersplat3d.segment.masks import finger_mask, mask_iou
 
     ious, missed = [], 0
@@ -125,7 +124,6 @@ def _iou_row(source: str, kind: str, photos: list, truths: list) -> None:
 
 
 def _fuse_rows(folder: Path, captures: list[str]) -> None:
-    from fingersplat3d.errors import InputError
     from fingersplat3d.eval.poses import relative_rotation_errors
     from fingersplat3d.experiments.backgrounds import BACKGROUNDS, background, on_background
     from fingersplat3d.io.datasets import load_any

@@ -212,7 +212,7 @@ def _backed_line(done: list[dict]) -> str:
     """The summary's sentence on the error split by a second view's backing (means over the views that have each
     part)."""
     def mean_of(key: str) -> float:
-        values = [float(r[key]) for r in done if r.get(key, "") != "" and np.isfinite(float(r[key]))]
+        values = [r[key] for r in done if np.isfinite(r.get(key, np.nan))]  # absent: a view not placed
         return float(np.mean(values)) if values else float("nan")
 
     share, two, one = mean_of("share_two_views"), mean_of("mae_two_views"), mean_of("mae_one_view")

@@ -568,8 +568,11 @@ def _same_hue(extra: np.ndarray, kept: np.ndarray, colour: np.ndarray) -> bool:
     where either is empty."""
     if not extra.any() or not kept.any():
         return True
-    chroma = colour / np.maximum(colour.sum(axis=-1, keepdims=True), 1e-6)
-    return float(np.linalg.norm(np.median(chroma[extra], 0) - np.median(chroma[kept], 0))) <= HUE_DISTANCE
+
+    def median_chroma(pixels: np.ndarray) -> np.ndarray:  # of the set's pixels only, not the whole photo's
+        return np.median(pixels / np.maximum(pixels.sum(axis=-1, keepdims=True), 1e-6), 0)
+
+    return float(np.linalg.norm(median_chroma(colour[extra]) - median_chroma(colour[kept]))) <= HUE_DISTANCE
 
 
 def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None],
