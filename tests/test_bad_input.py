@@ -103,7 +103,8 @@ def test_depth_wrong_shape_and_not_npy(tmp_path):
     path = write_depth(tmp_path / "d.npy", np.ones((4, 5)))
     assert "5x4" in raises_naming("d.npy", read_depth, path, shape=(4, 6))
     (tmp_path / "junk.npy").write_bytes(b"not numpy at all")
-    raises_naming("junk.npy", read_depth, tmp_path / "junk.npy")
+    message = raises_naming("junk.npy", read_depth, tmp_path / "junk.npy")
+    assert "NumPy's header" in message and "pickle" not in message  # never a hint to load a file unsafely
     raises_naming("absent.npy", read_depth, tmp_path / "absent.npy")
 
 
@@ -278,9 +279,12 @@ def test_uwa_frames_of_different_sizes_and_orientations_load(tmp_path):
 
 
 def test_mixed_gray_and_colour_views_and_too_few(tmp_path):
+    # A capture whose views mix grayscale and colour is fused in the one channel they all have, not refused.
     for name, channels in (("a", 1), ("b", 1), ("c", 3)):
-        cv2.imwrite(str(tmp_path / f"{name}.png"), np.zeros((H, W, channels), np.uint8) + np.arange(channels, dtype=np.uint8))
-    assert "c.png" in raises_naming("c.png", load_image_folder, tmp_path)
+        cv2.imwrite(str(tmp_path / f"{name}.png"), np.zeros((H, W, channels), np.uint8) + 40 * np.arange(channels, dtype=np.uint8))
+    capture = load_image_folder(tmp_path)
+    assert [view.image.ndim for view in capture.views] == [2, 2, 2]
+    assert np.allclose(capture.views[2].image, (0.299 * 80 + 0.587 * 40) / 255, atol=1e-6)  # stored B, G, R = 0, 40, 80
     (tmp_path / "c.png").unlink()
     raises_naming(tmp_path.name, load_image_folder, tmp_path, min_views=3)
     raises_naming("missing.png", load_image_folder, [tmp_path / "a.png", tmp_path / "missing.png"])

@@ -193,3 +193,30 @@ def test_webp_photos_are_read_upright_and_heic_is_named_with_what_to_do(tmp_path
     Image.fromarray(stored).save(only_gif / "finger.gif")
     with pytest.raises(InputError, match="holds no images .*its GIF photos are not read: save them as JPEG"):
         load_any(only_gif)
+
+
+def test_gray_stored_in_colour_is_read_gray_and_a_gif_is_refused_by_every_reader(tmp_path):
+    """A gray photo saved as RGB and re-encoded lossily (channels a level apart here and there) is one channel; a
+    photo whose channels differ by more is colour. A GIF is named as not read wherever a photo is read (``fs3d print``
+    reads photos one by one: it had read a GIF ``fs3d fuse`` refused)."""
+    from PIL import Image
+
+    from fingersplat3d.io.images import read_image
+
+    rng = np.random.default_rng(1)
+    gray_values = (rng.random((40, 64)) * 250).astype(np.uint8)
+    near = np.repeat(gray_values[..., None], 3, axis=2)
+    near[::7, ::5, 1] += 1  # a lossy codec's chroma: one level on some pixels
+    cv2.imwrite(str(tmp_path / "near.png"), near)
+    image = read_image(tmp_path / "near.png")
+    assert image.ndim == 2 and np.abs(image - gray_values / 255.0).max() <= 1.0 / 255.0
+    exact = np.repeat(gray_values[..., None], 3, axis=2)
+    cv2.imwrite(str(tmp_path / "exact.png"), exact)
+    assert np.array_equal(read_image(tmp_path / "exact.png"), gray_values / np.float32(255.0))  # to the bit
+    colour = exact.copy()
+    colour[20:, :, 2] += 3  # three levels of red on the lower rows: colour
+    cv2.imwrite(str(tmp_path / "colour.png"), colour)
+    assert read_image(tmp_path / "colour.png").shape == (40, 64, 3)
+    Image.fromarray(gray_values).save(tmp_path / "finger.gif")
+    with pytest.raises(InputError, match="GIF photos are not read: save them as JPEG"):
+        read_image(tmp_path / "finger.gif")

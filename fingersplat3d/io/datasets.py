@@ -80,13 +80,12 @@ def _image_files(folder_or_files: str | Path | Iterable[str | Path], recursive: 
 
 
 def _read_views(paths: Sequence[Path], gray: bool | None) -> list[np.ndarray]:
-    """The images of one capture: sizes and orientations may differ (a camera stored portrait), channels may not."""
+    """The images of one capture: sizes and orientations may differ (a camera stored portrait). Channels are one
+    model's: when some views are grayscale and some colour (a gray camera beside a phone, photos converted apart),
+    every view is read as grayscale, the one channel they all have."""
     images = [read_image(path, gray=gray) for path in paths]
-    for path, image in zip(paths[1:], images[1:]):
-        if image.ndim != images[0].ndim:
-            kinds = {2: "grayscale", 3: "colour"}
-            raise input_error(path, f"image is {kinds[image.ndim]} but {paths[0].name} is {kinds[images[0].ndim]}; "
-                                    "the views of one capture must all be grayscale or all colour")
+    if len({image.ndim for image in images}) > 1:
+        images = [image if image.ndim == 2 else read_image(path, gray=True) for path, image in zip(paths, images)]
     return images
 
 

@@ -37,6 +37,9 @@ def read_depth(path: str | Path, shape: tuple[int, int] | None = None) -> np.nda
     path = Path(path)
     if not path.is_file():
         raise input_error(path, "file not found")
+    with open(path, "rb") as file:
+        if file.read(6) != b"\x93NUMPY":  # numpy would take it for a pickle and suggest loading it unsafely
+            raise input_error(path, "not a .npy depth map (the file does not start with NumPy's header)")
     try:
         raw = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as error:

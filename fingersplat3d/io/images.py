@@ -18,7 +18,13 @@ __all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
                    ".arw": "raw", ".gif": "GIF"}
-"""Photo formats a phone or camera may write that OpenCV does not read here: named in the error, with what to do."""
+"""Photo formats a phone or camera may write that are not read here (OpenCV's build has no decoder for them, or, GIF,
+a palette of 256 colours): named in the error, with what to do, by every command that reads a photo
+(:func:`read_image` as well as the capture loaders: ``fs3d print`` had read a GIF that ``fs3d fuse`` refused)."""
+NEAR_GRAY = 2.0 / 255.0
+"""A colour image whose three channels lie within this of each other at every pixel is a gray one stored in colour (a
+gray photo saved as RGB, then re-encoded lossily: WebP moved 0.1 % of a real frame's pixels by one level): read as
+gray."""
 
 
 def unread_photos(kinds) -> str:
@@ -54,6 +60,8 @@ def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
     it (phone photos are stored sideways with a tag), the alpha channel dropped."""
     if not path.is_file():
         raise input_error(path, "file not found")
+    if path.suffix.lower() in UNREAD_SUFFIXES:
+        raise input_error(path, unread_photos([UNREAD_SUFFIXES[path.suffix.lower()]]))
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
     data = path.read_bytes()
@@ -93,8 +101,8 @@ def _jpeg_truncated(data: bytes) -> bool:
 def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
     """Read an image as float32 in [0, 1], upright as its EXIF orientation says (as every viewer shows a phone photo).
 
-    ``gray=None`` keeps what the file holds (colour images whose three channels are equal come
-    back grayscale); ``True`` converts to one channel; ``False`` always returns RGB.
+    ``gray=None`` keeps what the file holds (colour images whose three channels are equal, within
+    :data:`NEAR_GRAY`, come back grayscale); ``True`` converts to one channel; ``False`` always returns RGB.
     """
     path = Path(path)
     raw = _read_raw(path, upright=True)
@@ -114,13 +122,29 @@ def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
             image = image[..., :3]
         image = image[..., ::-1] if image.shape[2] == 3 else image[..., 0]
     if image.ndim == 3 and gray is None:
-        if np.array_equal(image[..., 0], image[..., 1]) and np.array_equal(image[..., 1], image[..., 2]):
+        spread = _channel_spread(image)
+        if spread == 0.0:  # the same values to the bit as the file's one channel
             image = image[..., 0]
+        elif spread <= NEAR_GRAY + 1e-7:
+            gray = True
     if gray is True and image.ndim == 3:
         image = image @ np.array([0.299, 0.587, 0.114], np.float32)
     if gray is False and image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=2)
     return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def _channel_spread(image: np.ndarray) -> float:
+    """The largest difference between a colour image's channels at any pixel, up to just past :data:`NEAR_GRAY`
+    (a band of rows at a time, stopping at the first band of colour: a 12-megapixel photo's spread map would be another
+    48 MB)."""
+    spread = 0.0
+    for start in range(0, image.shape[0], 256):
+        band = image[start:start + 256]
+        spread = max(spread, float(np.max(band.max(axis=2) - band.min(axis=2))))
+        if spread > NEAR_GRAY + 1e-7:
+            break
+    return spread
 
 
 def write_image(path: str | Path, image: np.ndarray, bits: int = 8) -> Path:
