@@ -612,6 +612,9 @@ def fuse(capture: Capture, config: FuseConfig | None = None, progress: bool = Fa
 
     if len(capture) < MIN_VIEWS:
         raise InputError("fs3d fuse needs at least one image")
+    if len({view.channels for view in capture.views}) > 1:  # the loaders read such photos alike (io.images.read_images)
+        raise InputError("the views mix grayscale and colour images: one model is fitted to them all; read them with "
+                         "fingersplat3d.io.images.read_images, which gives a capture one kind of channel")
     if rig is not None:
         _check_rig(capture, rig)
         refuse_focal_with_rig(config.focal_px, rig)

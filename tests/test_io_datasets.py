@@ -220,3 +220,26 @@ def test_gray_stored_in_colour_is_read_gray_and_a_gif_is_refused_by_every_reader
     Image.fromarray(gray_values).save(tmp_path / "finger.gif")
     with pytest.raises(InputError, match="GIF photos are not read: save them as JPEG"):
         read_image(tmp_path / "finger.gif")
+
+
+def test_every_loader_gives_a_capture_one_kind_of_channel(tmp_path):
+    """A CFPose folder or a capture folder whose photos mix grayscale and colour is read in gray, as an image folder
+    is (a capture folder of that kind had reached the splat fit with one channel in the model and three in a photo, and
+    ended in a traceback); a capture built by hand that mixes them is refused by the fuse with one sentence."""
+    from fingersplat3d.io import read_capture
+    from fingersplat3d.pipeline import fuse
+
+    colour = np.stack([gray(1), gray(2), gray(3)], -1)  # three different channels: colour
+    cfpose = make_cfpose(tmp_path / "cfpose", fingers=("1",), poses=range(1, 4))
+    cv2.imwrite(str(cfpose / "1_2.png"), colour)
+    (cfpose / "1_2.bmp").unlink(missing_ok=True)
+    (capture,) = load_cfpose(cfpose)
+    assert [view.channels for view in capture.views] == [1, 1, 1]
+    folder = write_capture(Capture((View("a", gray(4) / 255.0), View("b", gray(5) / 255.0))), tmp_path / "capture")
+    cv2.imwrite(str(folder / "images" / "b.png"), colour)
+    read = read_capture(folder)
+    assert [view.channels for view in read.views] == [1, 1]
+    assert np.allclose(read["b"].image, colour[..., ::-1] @ np.array([0.299, 0.587, 0.114]) / 255.0, atol=1e-5)
+    mixed = Capture((View("a", gray(4) / 255.0), View("b", colour / 255.0)))
+    with pytest.raises(InputError, match="mix grayscale and colour"):
+        fuse(mixed)

@@ -41,7 +41,7 @@ from ..scene import Capture, View
 from ..synth.rolled import ROLLED_PRINT_FILE
 from .cameras import read_cameras, write_cameras
 from .depth import read_depth, write_depth
-from .images import IMAGE_SUFFIXES, read_image, read_mask, unread_photos_note, write_image, write_mask
+from .images import IMAGE_SUFFIXES, read_images, read_mask, unread_photos_note, write_image, write_mask
 from .jsonio import read_json, to_jsonable
 from .minutiae import write_minutiae
 from .ply import write_mesh_ply
@@ -323,9 +323,9 @@ def capture_files(folder: str | Path) -> CaptureFiles:
 def read_capture(folder: str | Path, *, load_depth: bool = True, gray: bool | None = None) -> Capture:
     """Read a capture folder into a :class:`Capture` (every file checked; see the module doc).
 
-    Images are float32 in [0, 1] (``gray`` as in :func:`read_image`); masks are checked against
-    their image's size and must not be empty; depth maps must match their image and hold no Inf
-    or negative values (NaN is fine). With ``cameras.json`` its views must be exactly the
+    Images are float32 in [0, 1] (``gray`` as in :func:`~.images.read_images`, one kind of channel for all); masks are
+    checked against their image's size and must not be empty; depth maps must match their image and hold no Inf or
+    negative values (NaN is fine). With ``cameras.json`` its views must be exactly the
     capture's views with matching image sizes, and ``metadata["units"]`` (and
     ``"scale_mm_per_unit"`` when known) are taken from it. ``minutiae.json`` and ``mesh.ply`` are
     not loaded: :func:`capture_files` gives their paths.
@@ -340,8 +340,8 @@ def read_capture(folder: str | Path, *, load_depth: bool = True, gray: bool | No
             if name not in cameras.cameras:
                 raise input_error(files.cameras, f"has no camera for view {name!r}")
     views = []
-    for name in files.views:
-        image = read_image(files.images[name], gray=gray)
+    images = read_images([files.images[name] for name in files.views], gray=gray)
+    for name, image in zip(files.views, images):
         height, width = image.shape[:2]
         mask = None
         if name in files.masks:

@@ -25,13 +25,11 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Iterable, Sequence
 
-import numpy as np
-
 from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
 from .exif import exif_focal
-from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_image, read_mask, unread_photos, unread_photos_note
+from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_images, read_mask, unread_photos, unread_photos_note
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
            "load_cfpose", "load_image_folder", "load_any", "natural_key"]
@@ -77,16 +75,6 @@ def _image_files(folder_or_files: str | Path | Iterable[str | Path], recursive: 
         if not path.is_file():
             raise input_error(path, "file not found")
     return files, files[0].parent
-
-
-def _read_views(paths: Sequence[Path], gray: bool | None) -> list[np.ndarray]:
-    """The images of one capture: sizes and orientations may differ (a camera stored portrait). Channels are one
-    model's: when some views are grayscale and some colour (a gray camera beside a phone, photos converted apart),
-    every view is read as grayscale, the one channel they all have."""
-    images = [read_image(path, gray=gray) for path in paths]
-    if len({image.ndim for image in images}) > 1:
-        images = [image if image.ndim == 2 else read_image(path, gray=True) for path, image in zip(paths, images)]
-    return images
 
 
 # -------------------------------------------------------------------------------------------- UWA
@@ -161,7 +149,7 @@ def load_uwa(folder_or_files: str | Path | Iterable[str | Path], subject: object
                 expected = some.with_name(f"{group.stem}_{frame}{some.suffix}")
                 raise input_error(expected, f"UWA {group.label} is missing frame {frame}")
         paths = [group.frames[frame] for frame in wanted]
-        images = _read_views(paths, gray)
+        images = read_images(paths, gray)
         names = [f"f{frame}" for frame in wanted]
         metadata = _uwa_metadata(group, wanted)
         captures.append(Capture(tuple(View(name, image) for name, image in zip(names, images)), metadata))
@@ -213,7 +201,8 @@ def load_cfpose(folder: str | Path | Iterable[str | Path], finger: object = None
     fingers = _cfpose_fingers(folder, finger)
     for finger_id in sorted(fingers, key=natural_key):
         poses = sorted(fingers[finger_id])
-        views = tuple(View(f"p{pose}", read_image(fingers[finger_id][pose], gray=gray)) for pose in poses)
+        images = read_images([fingers[finger_id][pose] for pose in poses], gray=gray)
+        views = tuple(View(f"p{pose}", image) for pose, image in zip(poses, images))
         metadata = {"dataset": "cfpose", "finger": finger_id, "poses": poses,
                     "sources": {f"p{pose}": str(fingers[finger_id][pose]) for pose in poses}}
         captures.append(Capture(views, metadata))
@@ -256,7 +245,7 @@ def load_image_folder(folder_or_files: str | Path | Iterable[str | Path], gray: 
         if path.stem in seen:
             raise input_error(path, f"has the same name as {seen[path.stem]}; view names must be unique")
         seen[path.stem] = path
-    images = _read_views(files, gray)
+    images = read_images(files, gray)
     views = []
     for path, image in zip(files, images):
         mask_path = _find_mask(path)

@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "write_image", "read_mask", "write_mask"]
+__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "read_images",
+           "write_image", "read_mask", "write_mask"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
@@ -132,6 +133,17 @@ def read_image(path: str | Path, gray: bool | None = None) -> np.ndarray:
     if gray is False and image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=2)
     return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def read_images(paths, gray: bool | None = None) -> list[np.ndarray]:
+    """The photos of one capture (:func:`read_image` each), in one kind of channel: one model is fitted to them all, so
+    when some are grayscale and some colour (a gray camera beside a phone, photos converted apart), every one is read
+    as grayscale, the one channel they all have. Sizes and orientations may differ."""
+    paths = [Path(path) for path in paths]
+    images = [read_image(path, gray=gray) for path in paths]
+    if len({image.ndim for image in images}) > 1:
+        images = [image if image.ndim == 2 else read_image(path, gray=True) for path, image in zip(paths, images)]
+    return images
 
 
 def _channel_spread(image: np.ndarray) -> float:
