@@ -72,3 +72,14 @@ def test_render_refuses_bad_input(tmp_path, capsys):
     assert main(["render", str(single)]) == 2
     assert "cannot place novel views" in capsys.readouterr().err
     assert not (single / "renders").exists()
+
+
+def test_render_refuses_a_model_without_gaussians(tmp_path, capsys):
+    """A gaussians.ply with no rows (a file that reads) would render blank views and say nothing: refused, nothing
+    written."""
+    folder, _, model = _reconstruction(tmp_path)
+    empty = Gaussians(model.means[:0], model.quats[:0], model.log_scales[:0], model.opacity_logits[:0], model.sh_dc[:0])
+    write_gaussians_ply(folder / "gaussians.ply", empty)
+    assert main(["render", str(folder)]) == 2
+    assert "holds no Gaussians" in capsys.readouterr().err
+    assert not (folder / "renders").exists()

@@ -52,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
 
     cameras = read_cameras(folder / "cameras.json")
     gaussians = read_gaussians_ply(folder / "gaussians.ply").to(resolve_device("auto"))
+    if len(gaussians) == 0:  # blank views would say nothing of why
+        raise InputError(f"{folder / 'gaussians.ply'}: holds no Gaussians: nothing to render (fuse the photos again "
+                         "without --no-splat)")
     inputs = [c.scaled(args.scale) if args.scale != 1 else c for c in cameras.cameras.values()]
     start = time.perf_counter()
     try:
