@@ -430,12 +430,18 @@ def _with_exif_focal(capture: Capture, config: FuseConfig, rig: Rig | None, repo
 
 
 def _redraw(capture: Capture, config: FuseConfig):
-    """The views' pointmaps drawn through a given focal, where the backend draws them through a guessed one (the
-    prior without ``--focal-px``), for :func:`~fingersplat3d.align.register.register_views`; else None."""
-    if config.focal_px is not None or config.view_focals_px is not None or config.backend != "prior":
-        return None  # a known focal is kept; a learned backend's pointmaps come with its focal
+    """The views' pointmaps drawn again through a given focal (None: the one they were drawn with) and with given
+    tilts, for :func:`~fingersplat3d.align.register.register_views`, where the backend is the prior; else None (a
+    learned backend's pointmaps come with their own focal and shape). A known focal is never redrawn."""
+    if config.backend != "prior":
+        return None
     backend = _backend(config)
-    return lambda focal: replace(backend, focal_px=float(focal)).predict_views(capture.views)
+    known = config.focal_px is not None or config.view_focals_px is not None
+
+    def redraw(focal: float | None, tilts: list | None):
+        moved = {} if focal is None or known else {"focal_px": float(focal)}
+        return replace(backend, **moved, view_tilts=None if tilts is None else tuple(tilts)).predict_views(capture.views)
+    return redraw
 
 
 def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_pointmaps, config: FuseConfig,
@@ -453,7 +459,10 @@ def _register(capture: Capture, pairs: list[tuple[int, int]], pointmaps, pair_po
                                   "turn_changes_deg": registration.turn_changes_deg,
                                   "tip": {view.name: tip for view, tip in zip(capture.views, registration.tips)},
                                   "photometric": registration.photometric,
-                                  "pointmaps_redrawn_at_px": registration.redrawn_at_px}
+                                  "pointmaps_redrawn_at_px": registration.redrawn_at_px,
+                                  "axis_tilt_deg": {view.name: None if tilt is None else round(tilt, 2)
+                                                    for view, tilt in zip(capture.views, registration.axis_tilts_deg)},
+                                  "pointmaps_tilted": registration.tilted}
         return registration.alignment, registration.pointmaps
     if rig is not None:
         raise InputError("a rig (--rig) is used with image correspondences; the dust3r backend's pairwise pointmaps "

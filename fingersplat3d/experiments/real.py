@@ -148,7 +148,9 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "warned_turns": any(_TURN_WARNING in str(w) or NO_TIP_WARNING in str(w) for w in report.get("warnings", [])),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],
-              "angles_deg": pair_angles_deg(rotations)}
+              "angles_deg": pair_angles_deg(rotations),
+              "axis_tilt_deg": report.get("registration", {}).get("axis_tilt_deg", {}),
+              "pointmaps_tilted": bool(report.get("registration", {}).get("pointmaps_tilted", False))}
     twos = {}
     if (leave_one_out or two_views) and len(capture) == 3:
         twos["01"] = fuse(Capture(capture.views[:2], capture.metadata), config)

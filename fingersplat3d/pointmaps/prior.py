@@ -27,7 +27,10 @@ width, and the visible half of the slice rises above that chord like a half elli
 
 What a single silhouette cannot show is a tilt of the finger toward the camera (pitch, and the
 shear of a rolled section); it shows up as a ramp in the depth error, which the global
-alignment's smooth per-view correction can take up. The defaults, and this model against
+alignment's smooth per-view correction takes up where two views see the skin, not where one alone
+does. Registered views show the pitch (:mod:`~fingersplat3d.align.axis_tilt`): the pointmaps are
+drawn again with each view's depth gradient along the image (``view_tilts``), the surface's depth
+ramped about the silhouette's median pixel. The defaults, and this model against
 distance-transform inflation, are measured in ``tools/bench_prior.py`` on synthetic ground truth.
 """
 from __future__ import annotations
@@ -47,10 +50,11 @@ from ..segment.silhouette import (Sections, WidthReference, along_axis, axis_coo
                                   finger_axis, mask_pixels)
 from .base import Pointmap, register_backend
 
-__all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points"]
+__all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points", "tilted_height"]
 
 PERSPECTIVE_ITERATIONS = 8  # fixed-point steps of the perspective ray cast (max change < 0.3 px after 8)
 MAX_RELIEF = 0.9  # relief cap, in focal lengths: keeps every point in front of the camera
+MAX_TILT = 5.0  # a depth gradient beyond this (a finger within 11 degrees of end on) is not a finger's pitch
 CONFIDENCE_FLOOR = 0.01  # every mask pixel keeps a point: confidence > 0 inside the mask
 
 
@@ -96,6 +100,9 @@ class PriorBackend:
     view_focals_px: tuple[float, ...] | None = None
     """Each view's focal length in its pixels, when known view by view (photos taken at other zooms, whose EXIF
     records each); it replaces ``focal_px`` and the guess."""
+    view_tilts: tuple[tuple[float, float] | None, ...] | None = None
+    """Each view's depth gradient along its image ``(d depth / du, d depth / dv)`` (units per pixel at the depth of one
+    focal; None: level), from the registered cameras' finger axis (:func:`~fingersplat3d.align.axis_tilt.view_tilts`)."""
 
     def __post_init__(self) -> None:
         checks = [(name, getattr(self, name), low, high, low_allowed) for name, low, high, low_allowed in
@@ -105,6 +112,9 @@ class PriorBackend:
             checks.append(("focal_px", self.focal_px, 0.0, math.inf, False))
         if self.view_focals_px is not None:
             checks += [(f"view_focals_px[{i}]", f, 0.0, math.inf, False) for i, f in enumerate(self.view_focals_px)]
+        for i, tilt in enumerate(self.view_tilts or ()):
+            checks += [] if tilt is None else [(f"view_tilts[{i}][{k}]", g, -MAX_TILT, MAX_TILT, True)
+                                               for k, g in enumerate(tilt)]
         for field_name, value, low, high, low_allowed in checks:
             # a number, not text that reads as one ("3" would repeat a string where the focal multiplies)
             number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
@@ -143,7 +153,9 @@ class PriorBackend:
             focal = self.focal_px if self.focal_px is not None else self.focal_factor * max(view.width, view.height)
         relief = finger_height(mask, self.depth_ratio, self.smoothing, self.confidence_knee,
                                focal if self.perspective else None, widths=widths, axis=axis)
-        points = height_to_points(relief.height, mask, focal)
+        tilt = self.view_tilts[index] if self.view_tilts is not None and index < len(self.view_tilts) else None
+        height = relief.height if tilt is None else tilted_height(relief.height, mask, tilt)
+        points = height_to_points(height, mask, focal)
         return Pointmap(index, points, relief.confidence, float(focal))
 
 
@@ -167,6 +179,19 @@ def height_to_points(height: np.ndarray, mask: np.ndarray, focal: float) -> np.n
     np.multiply(depth, y[:, None], out=points[..., 1])
     points[..., 2] = depth
     return points
+
+
+def tilted_height(height: np.ndarray, mask: np.ndarray, gradient: Sequence[float]) -> np.ndarray:
+    """``height`` (relief toward the camera, pixels) of a surface whose depth also grows by ``gradient`` (units per
+    pixel along u and v) from the mask's median pixel: the swept surface with its axis tilted in depth. Off the mask,
+    as it was."""
+    mask = np.asarray(mask, bool)
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return height
+    ramp = np.zeros(mask.shape, np.float64)
+    ramp[rows, cols] = gradient[0] * (cols - np.median(cols)) + gradient[1] * (rows - np.median(rows))
+    return np.where(mask, height - ramp, height).astype(height.dtype)
 
 
 def finger_height(mask: np.ndarray, depth_ratio: float = 0.95, smoothing: float = 0.15,

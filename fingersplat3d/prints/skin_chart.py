@@ -50,6 +50,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from ..scene import Camera
+from ..segment.axis_planes import axis_plane_normal, planes_meet
 
 __all__ = ["FingerFrame", "SkinChart", "finger_frame", "skin_chart", "kasa_circle", "PHI_STEP_DEG"]
 
@@ -124,16 +125,13 @@ def finger_frame(points: np.ndarray, cameras: Sequence[Camera], axes_2d: Sequenc
     centroid = points.mean(0)
     normals, tips = [], []
     for camera, (origin, direction) in zip(cameras, axes_2d):
-        rays = camera.pixel_directions(np.array([origin, origin + 50.0 * np.asarray(direction)])) @ camera.rotation
-        normal = np.cross(rays[0], rays[1])
-        if np.linalg.norm(normal) > 0:
-            normals.append(normal / np.linalg.norm(normal))
-            tips.append((camera, rays[0], np.asarray(direction, np.float64)))
-    axis, axis_from = None, "points"
-    if len(normals) >= 2:
-        _, values, vectors = np.linalg.svd(np.array(normals))
-        if values[1] > _PLANES_SPREAD * values[0]:
-            axis, axis_from = vectors[-1], "silhouettes"
+        normal = axis_plane_normal(camera, origin, direction)
+        if normal is not None:
+            normals.append(normal)
+            tips.append((camera, camera.pixel_directions(np.asarray(origin, np.float64)) @ camera.rotation,
+                         np.asarray(direction, np.float64)))
+    axis = planes_meet(normals, _PLANES_SPREAD)
+    axis_from = "points" if axis is None else "silhouettes"
     if axis is None:
         _, _, vectors = np.linalg.svd(points - centroid, full_matrices=False)
         axis = vectors[0]
