@@ -49,6 +49,19 @@ def test_the_axis_is_where_the_views_planes_meet_and_open_where_they_coincide():
     assert axis_direction(np.array([[np.nan, 0, 0], [0, 1.0, 0]])) is None
 
 
+def test_a_view_the_axis_would_put_beyond_45_degrees_is_drawn_level():
+    """A registration that puts the finger pointing into a camera gives that view no tilt (the prior would refuse a
+    gradient of a finger seen nearly end on, and the registration is what is wrong)."""
+    from fingersplat3d.align.axis_tilt import MAX_TILT_DEG
+
+    cameras = _ring([-45.0, 0.0, 45.0])
+    direction = _pitched(60.0)
+    axes = [_image_axis(camera, direction) for camera in cameras]
+    tilts = view_tilts([np.linalg.inv(c.world_to_cam) for c in cameras], [FOCAL] * 3, [SIZE] * 3, axes, [True] * 3)
+    assert tilts[1] is None  # the front camera sees the axis 60 degrees out of its plane
+    assert all(t is None or tilt_deg(t) <= MAX_TILT_DEG for t in tilts)
+
+
 @pytest.mark.parametrize("pitch", [0.0, 7.0, -12.0, 20.0])
 def test_each_views_tilt_is_the_axis_angle_out_of_its_photo_plane(pitch):
     """Three cameras ±45° about a finger pitched toward them: each view's tilt is the angle its axis makes with the

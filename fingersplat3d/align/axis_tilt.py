@@ -25,7 +25,12 @@ from ..scene import Camera
 from ..segment.axis_planes import axis_plane_normal, planes_meet
 from ..segment.silhouette import capture_axes, finger_axis
 
-__all__ = ["axis_direction", "view_tilts", "silhouette_axes", "tilt_deg", "MIN_PLANE_SPREAD"]
+__all__ = ["axis_direction", "view_tilts", "silhouette_axes", "tilt_deg", "MIN_PLANE_SPREAD", "MAX_TILT_DEG"]
+
+MAX_TILT_DEG = 45.0
+"""A view whose axis the planes put further out of its photo's plane is given no tilt (drawn level): a finger is not
+photographed pointing that far toward a camera (the CFPose-style shots pitch it up to 15°, the real rig 0-6°), and a
+swept-section prior tilted so steeply would stand on a wrong registration."""
 
 MIN_PLANE_SPREAD = math.tan(math.radians(5.0))
 """The planes' second singular value over their first under which they are taken to coincide (two planes 10° apart
@@ -49,7 +54,7 @@ def view_tilts(cam_to_world: Sequence[np.ndarray], focals: Sequence[float], size
                axes: Sequence[tuple[np.ndarray, np.ndarray]], aligned: Sequence[bool]) -> list[np.ndarray | None]:
     """Per view, the finger surface's depth gradient along the image ``[d depth / du, d depth / dv]`` (units per pixel
     at the depth of one focal) that the 3D axis of the ``aligned`` views gives (module docstring); None for a view
-    not aligned, or for all where the axis is open. ``axes``: :func:`silhouette_axes`; ``sizes``: (width, height)."""
+    not aligned or tilted beyond :data:`MAX_TILT_DEG`, and for all where the axis is open. ``axes``: :func:`silhouette_axes`; ``sizes``: (width, height)."""
     views = [i for i, ok in enumerate(aligned) if ok and math.isfinite(focals[i]) and focals[i] > 0]  # a lost focal: none
     cameras = {i: Camera.from_focal(float(focals[i]), *sizes[i], np.linalg.inv(cam_to_world[i])) for i in views}
     normals = [axis_plane_normal(cameras[i], axes[i][1], axes[i][0]) for i in views]
@@ -63,7 +68,8 @@ def view_tilts(cam_to_world: Sequence[np.ndarray], focals: Sequence[float], size
         along = float(local[:2] @ axis)
         if abs(along) < 1e-6:  # the finger seen end on: no line in the image to tilt along
             continue
-        tilts[i] = (local[2] / along) * axis  # depth per pixel stepped along the image axis, as a gradient
+        gradient = (local[2] / along) * axis  # depth per pixel stepped along the image axis, as a gradient
+        tilts[i] = gradient if tilt_deg(gradient) <= MAX_TILT_DEG else None
     return tilts
 
 
