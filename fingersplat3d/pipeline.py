@@ -432,14 +432,14 @@ def _with_exif_focal(capture: Capture, config: FuseConfig, rig: Rig | None, repo
 def _redraw(capture: Capture, config: FuseConfig):
     """The views' pointmaps drawn again through a given focal (None: the one they were drawn with) and with given
     tilts, for :func:`~fingersplat3d.align.register.register_views`, where the backend is the prior; else None (a
-    learned backend's pointmaps come with their own focal and shape). A known focal is never redrawn."""
+    learned backend's pointmaps come with their own focal and shape). The registration asks for a focal only where it
+    fitted one: a known focal is held in its alignment (:func:`_in_working_pixels`), so it is never redrawn."""
     if config.backend != "prior":
         return None
     backend = _backend(config)
-    known = config.focal_px is not None or config.view_focals_px is not None
 
     def redraw(focal: float | None, tilts: list | None):
-        moved = {} if focal is None or known else {"focal_px": float(focal)}
+        moved = {} if focal is None else {"focal_px": float(focal)}
         return replace(backend, **moved, view_tilts=None if tilts is None else tuple(tilts)).predict_views(capture.views)
     return redraw
 

@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from fingersplat3d.align.axis_tilt import MIN_PLANE_SPREAD, axis_direction, tilt_deg, view_tilts
+from fingersplat3d.align.axis_tilt import MIN_PLANE_SPREAD, tilt_deg, view_tilts
 from fingersplat3d.errors import InputError
 from fingersplat3d.pointmaps.prior import PriorBackend, tilted_height
+from fingersplat3d.segment.axis_planes import planes_meet
 from fingersplat3d.scene import Camera, View, look_at
 from fingersplat3d.synth.rigs import rotation_about
 
@@ -35,6 +36,10 @@ def _image_axis(camera, direction):
 
 def _pitched(deg):
     return rotation_about([0.0, 1.0, 0.0], deg) @ np.array([1.0, 0.0, 0.0])
+
+
+def axis_direction(normals):
+    return planes_meet(normals, MIN_PLANE_SPREAD)
 
 
 def test_the_axis_is_where_the_views_planes_meet_and_open_where_they_coincide():
@@ -170,7 +175,7 @@ def test_a_finger_lying_tilted_in_the_rig_is_found_so_and_drawn_tilted():
     pointmaps are drawn again with them."""
     from pathlib import Path
 
-    from fingersplat3d.align.axis_tilt import silhouette_axes
+    from fingersplat3d.segment.silhouette import capture_finger_axes
     from fingersplat3d.io.capture import read_capture
     from fingersplat3d.pipeline import FuseConfig, fuse
     from fingersplat3d.scene import Capture
@@ -178,7 +183,7 @@ def test_a_finger_lying_tilted_in_the_rig_is_found_so_and_drawn_tilted():
     capture = read_capture(Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed1")
     views = capture.views
     truth = view_tilts([np.linalg.inv(v.camera.world_to_cam) for v in views], [v.camera.K[0, 0] for v in views],
-                       [(v.width, v.height) for v in views], silhouette_axes([v.mask for v in views]), [True] * 3)
+                       [(v.width, v.height) for v in views], capture_finger_axes([v.mask for v in views]), [True] * 3)
     blind = Capture(tuple(v.with_(camera=None, depth=None) for v in views), capture.metadata)
     registration = fuse(blind, FuseConfig(splat=None)).report["registration"]
     found = registration["axis_tilt_deg"]

@@ -23,9 +23,8 @@ import numpy as np
 
 from ..scene import Camera
 from ..segment.axis_planes import axis_plane_normal, planes_meet
-from ..segment.silhouette import capture_axes, finger_axis
 
-__all__ = ["axis_direction", "view_tilts", "silhouette_axes", "tilt_deg", "MIN_PLANE_SPREAD", "MAX_TILT_DEG"]
+__all__ = ["view_tilts", "tilt_deg", "MIN_PLANE_SPREAD", "MAX_TILT_DEG"]
 
 MAX_TILT_DEG = 45.0
 """A view whose axis the planes put further out of its photo's plane is given no tilt (drawn level): a finger is not
@@ -37,24 +36,11 @@ MIN_PLANE_SPREAD = math.tan(math.radians(5.0))
 give this): their meeting line is then a guess."""
 
 
-def silhouette_axes(masks: Sequence[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each view's finger axis ``(unit direction (du, dv), a point on it)`` as the prior finds it: the capture's agreed
-    axes (:func:`~fingersplat3d.segment.silhouette.capture_axes`), then :func:`~fingersplat3d.segment.silhouette.finger_axis`."""
-    masks = [np.asarray(mask, bool) for mask in masks]
-    return [finger_axis(mask, hint) for mask, hint in zip(masks, capture_axes(masks))]
-
-
-def axis_direction(normals: np.ndarray) -> np.ndarray | None:
-    """The unit vector most nearly in every plane of world ``normals [K, 3]`` (sign arbitrary), or None where the planes
-    are fewer than two or nearly one (:data:`MIN_PLANE_SPREAD`)."""
-    return planes_meet(list(np.asarray(normals, np.float64).reshape(-1, 3)), MIN_PLANE_SPREAD)
-
-
 def view_tilts(cam_to_world: Sequence[np.ndarray], focals: Sequence[float], sizes: Sequence[tuple[int, int]],
                axes: Sequence[tuple[np.ndarray, np.ndarray]], aligned: Sequence[bool]) -> list[np.ndarray | None]:
     """Per view, the finger surface's depth gradient along the image ``[d depth / du, d depth / dv]`` (units per pixel
     at the depth of one focal) that the 3D axis of the ``aligned`` views gives (module docstring); None for a view
-    not aligned or tilted beyond :data:`MAX_TILT_DEG`, and for all where the axis is open. ``axes``: :func:`silhouette_axes`; ``sizes``: (width, height)."""
+    not aligned or tilted beyond :data:`MAX_TILT_DEG`, and for all where the axis is open. ``axes``: :func:`~fingersplat3d.segment.silhouette.capture_finger_axes`; ``sizes``: (width, height)."""
     views = [i for i, ok in enumerate(aligned) if ok and math.isfinite(focals[i]) and focals[i] > 0]  # a lost focal: none
     cameras = {i: Camera.from_focal(float(focals[i]), *sizes[i], np.linalg.inv(cam_to_world[i])) for i in views}
     normals = [axis_plane_normal(cameras[i], axes[i][1], axes[i][0]) for i in views]

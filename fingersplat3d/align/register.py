@@ -51,8 +51,8 @@ from ..device import per_item
 from ..pointmaps.base import Pointmap
 from ..scene import View
 from ..segment.side_cut import capture_frames
-from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, silhouette_frame
-from .axis_tilt import silhouette_axes, tilt_deg, view_tilts
+from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, capture_finger_axes, silhouette_frame
+from .axis_tilt import tilt_deg, view_tilts
 from .correspond.chart import CylinderChart
 from .correspond.chart_growth import grow_first_guess
 from .correspond.chart_shift import (RIVAL_TURN_DEG, ChartPredictor, ChartShift, chart_shift_candidates,
@@ -452,7 +452,7 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
             limit += 1
     redrawn_at, tilts, tilted = None, [None] * n_views, False
     if redraw is not None and rig is None and fitted:
-        tilts = view_tilts(alignment.cam_to_world, alignment.focals, sizes, silhouette_axes(prepared.masks),
+        tilts = view_tilts(alignment.cam_to_world, alignment.focals, sizes, capture_finger_axes(prepared.masks),
                            alignment.aligned)
         redrawn = _redrawn(alignment, depths, focals, solved_with, redraw, config, tilts)
         if redrawn is not None:
@@ -743,13 +743,15 @@ def _redrawn(alignment: GlobalAlignment, depths: list[np.ndarray], focals: list[
     pairs drawn tilted 0.30 -> 1.57 and 4.24 -> 5.42 degrees off, their tilts right within 0.7 degrees). The focal is
     drawn when the views share a fitted one that is a finite positive number further than ``redraw_tolerance`` from the
     guess; the tilts when some view's reaches ``redraw_tilt_deg``."""
+    if sum(alignment.aligned) < PIVOT_MIN_VIEWS:
+        return None
     align_config = config.global_align
     focal = None
-    if align_config.shared_focal and align_config.optimize_focal and sum(alignment.aligned) >= PIVOT_MIN_VIEWS:
+    if align_config.shared_focal and align_config.optimize_focal:
         fitted, guess = float(alignment.focals[0]), float(np.exp(np.mean(np.log(focals))))
         if np.isfinite(fitted) and fitted > 0 and abs(np.log(fitted / guess)) > np.log1p(config.redraw_tolerance):
             focal = fitted  # a fit that lost its focal keeps the pointmaps it had (the caller reports the fit)
-    angles = [tilt_deg(tilt) for tilt in (tilts or [])] if sum(alignment.aligned) >= PIVOT_MIN_VIEWS else []
+    angles = [tilt_deg(tilt) for tilt in (tilts or [])]
     tilted = config.redraw_tilt_deg > 0 and any(a is not None and a >= config.redraw_tilt_deg for a in angles)
     if focal is None and not tilted:
         return None

@@ -46,8 +46,8 @@ from ..errors import InputError
 from ..scene import View
 from ..segment.masks import finger_mask
 from ..segment.side_cut import side_cut_widths
-from ..segment.silhouette import (Sections, WidthReference, along_axis, axis_coordinates, capture_axes, chord_sections,
-                                  finger_axis, mask_pixels)
+from ..segment.silhouette import (Sections, WidthReference, along_axis, axis_coordinates, capture_finger_axes,
+                                  chord_sections, finger_axis, mask_pixels)
 from .base import Pointmap, register_backend
 
 __all__ = ["PriorBackend", "FingerHeight", "finger_height", "height_to_points", "tilted_height"]
@@ -129,8 +129,7 @@ class PriorBackend:
         from ..device import per_item  # here: importing the backend does not load torch
 
         masks = [self._mask(view) for view in views]
-        hints = capture_axes(masks)
-        axes = [finger_axis(mask, hint) for mask, hint in zip(masks, hints)]  # (axis, origin) per view, found once
+        axes = capture_finger_axes(masks)  # (axis, origin) per view, found once
         widths = side_cut_widths(masks, axes=[axis for axis, _ in axes])
         return per_item(lambda index: self._predict(index, views[index], masks[index], axes[index], widths[index]),
                         range(len(views)))

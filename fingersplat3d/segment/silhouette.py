@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "chord_sections",
+__all__ = ["Sections", "SilhouetteFrame", "principal_axis", "finger_axis", "capture_axes", "capture_finger_axes", "chord_sections",
            "silhouette_frame", "orient_frames", "along_axis", "raw_chords", "WidthReference", "local_quadratic",
            "widest_disc", "outline_swell", "OUTLINE_SWELL", "mask_pixels", "axis_coordinates", "TIP_BASES",
            "SIDE_CUT_WIDTHS"]
@@ -264,6 +264,13 @@ def capture_axes(masks: Sequence[np.ndarray]) -> list[np.ndarray | None]:
 END_TANGENT = 0.5
 """:func:`_end_to_end`: an outline point belongs to an end when its tangent runs within 30 degrees of across the
 direction (the cosine between them below this)."""
+
+
+def capture_finger_axes(masks: Sequence[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each view's :func:`finger_axis` ``(unit direction, centroid)``, an outline the frame does not cut taking the axis
+    the capture's views agree on (:func:`capture_axes`): the axes the prior sweeps its sections along."""
+    masks = [np.asarray(mask, bool) for mask in masks]
+    return [finger_axis(mask, hint) for mask, hint in zip(masks, capture_axes(masks))]
 
 
 def _outline(mask: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
