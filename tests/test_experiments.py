@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from fingersplat3d.experiments.geometry import CASES, GeometryCase, geometry_table, pick_views
 from fingersplat3d.experiments.process import in_fresh_process, peak_rss_mb
-from fingersplat3d.experiments.real import real_table, summarize_real, two_view_table, two_view_turn_errors
+from fingersplat3d.experiments.real import (real_table, summarize_real, two_view_table, two_view_turn_errors,
+                                           two_view_turn_excess)
 from fingersplat3d.scene import Camera, Capture, View
 
 
@@ -122,14 +123,23 @@ def test_two_view_turn_errors_compare_each_pair_alone_with_the_same_pair_in_all_
     errors = two_view_turn_errors(three, twos)
     assert errors["01"] == pytest.approx(7.0) and errors["02"] == pytest.approx(0.0, abs=1e-6)
     assert errors["12"] is None  # not registered: no turn to compare, never a 0
+    excess = two_view_turn_excess(three, twos)
+    assert excess["01"] == pytest.approx(7.0) and excess["02"] == pytest.approx(0.0, abs=1e-6) and excess["12"] is None
+    narrower = two_view_turn_excess(three, {"01": _fused([0.0, 41.5]), "02": _fused([5.0, -40.0])})
+    assert narrower["01"] == pytest.approx(-3.5) and narrower["02"] == pytest.approx(1.0)  # signed, whichever way round
     records = _records([(45, 45), (45, 45)], ["1_1", "2_2"])
-    records[0]["two_view_turn_error_deg"] = errors
+    records[0]["two_view_turn_error_deg"], records[0]["two_view_turn_excess_deg"] = errors, excess
     records[1]["two_view_turn_error_deg"] = {"01": 3.0, "02": 1.0, "12": None}
+    records[1]["two_view_turn_excess_deg"] = {"01": -3.0, "02": 1.0, "12": None}
     summary = summarize_real(records)["two_views"]
-    assert summary["01"] == {"registered": 2, "captures": 2, "median_deg": pytest.approx(5.0), "max_deg": pytest.approx(7.0)}
+    assert summary["01"] == {"registered": 2, "captures": 2, "median_deg": pytest.approx(5.0), "max_deg": pytest.approx(7.0),
+                             "wider": 1, "signed": 2, "excess_median_deg": pytest.approx(2.0),
+                             "by_finger": {"1_1": pytest.approx(7.0), "2_2": pytest.approx(3.0)}}
     assert summary["12"]["registered"] == 0 and summary["12"]["median_deg"] is None
+    assert summary["12"]["signed"] == 0 and summary["12"]["by_finger"] == {"1_1": None, "2_2": None}
     table = two_view_table({"two_views": summary})
-    assert "| 0, 1 | 2 of 2 | 5.00 (7.00) |" in table and "| 1, 2 | 0 of 2 | – |" in table
+    assert "| 0, 1 | 2 of 2 | 5.00 (7.00) | 1_1 7.00, 2_2 3.00 | 1 of 2, +2.00 |" in table
+    assert "| 1, 2 | 0 of 2 | – | 1_1 –, 2_2 – | – |" in table
 
 
 def _square(x):

@@ -91,21 +91,34 @@ def leave_one_view_out(three, two) -> dict:
     return texture_check(two, Camera(K, pose, view2.width, view2.height), view2)
 
 
+def _pair_rotations(three, twos: dict):
+    """Per view pair ``"ij"`` of ``twos``: the world-to-camera rotations of views i and j fused alone and in ``three``,
+    or None where either fuse did not register."""
+    for key, two in twos.items():
+        i, j = int(key[0]), int(key[1])
+        registered = three.registered and two.registered
+        yield key, ((two.cameras[0].world_to_cam[:3, :3], two.cameras[1].world_to_cam[:3, :3]),
+                    (three.cameras[i].world_to_cam[:3, :3], three.cameras[j].world_to_cam[:3, :3])) if registered else None
+
+
 def two_view_turn_errors(three, twos: dict) -> dict:
     """Per view pair ``"ij"``: how far the turn of a fuse of views i and j alone (``twos["ij"]``) lies from the same
     pair's turn in the fuse of all views ``three`` (degrees; None where the pair did not register)."""
     from ..eval.poses import rotation_angle_deg
 
-    errors = {}
-    for key, two in twos.items():
-        i, j = int(key[0]), int(key[1])
-        if not (three.registered and two.registered):
-            errors[key] = None
-            continue
-        own = two.cameras[1].world_to_cam[:3, :3] @ two.cameras[0].world_to_cam[:3, :3].T
-        joint = three.cameras[j].world_to_cam[:3, :3] @ three.cameras[i].world_to_cam[:3, :3].T
-        errors[key] = float(rotation_angle_deg(own, joint))
-    return errors
+    return {key: None if found is None else float(rotation_angle_deg(found[0][1] @ found[0][0].T, found[1][1] @ found[1][0].T))
+            for key, found in _pair_rotations(three, twos)}
+
+
+def two_view_turn_excess(three, twos: dict) -> dict:
+    """Per view pair ``"ij"``: how much wider (positive) or narrower the angle between the optical axes of views i and j
+    comes out fused alone than in the fuse of all views (degrees; None where the pair did not register). The sign
+    :func:`two_view_turn_errors` lacks: two views' turn slides along the bas-relief valley, one way on every capture
+    where a bias holds it."""
+    from ..eval.poses import view_turn_deg
+
+    return {key: None if found is None else float(view_turn_deg(*found[0])[0] - view_turn_deg(*found[1])[0])
+            for key, found in _pair_rotations(three, twos)}
 
 
 def pair_angles_deg(rotations) -> dict[str, float]:
@@ -160,6 +173,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
         for i, j in ((0, 2), (1, 2)):
             twos[f"{i}{j}"] = fuse(Capture((capture.views[i], capture.views[j]), capture.metadata), config)
         record["two_view_turn_error_deg"] = two_view_turn_errors(three, twos)
+        record["two_view_turn_excess_deg"] = two_view_turn_excess(three, twos)
     return record
 
 
@@ -209,16 +223,27 @@ def sensitivity_against_deviation(records: list[dict], summary: dict) -> dict:
 
 
 def _two_view_summary(records: list[dict]) -> dict:
-    """Per view pair, over the captures measured with ``two_views``: how many registered alone, and the median and
-    largest turn error against the three-view fuse."""
+    """Per view pair, over the captures measured with ``two_views``: how many registered alone, the median and largest
+    turn error against the three-view fuse, its median per finger (one tuned on, the other held out), and how many
+    came out turned wider than with all views (with the median of that signed difference)."""
     summary = {}
     for record in records:
         for pair, error in record.get("two_view_turn_error_deg", {}).items():
-            summary.setdefault(pair, []).append(error)
-    return {pair: {"registered": sum(e is not None for e in errors), "captures": len(errors),
-                   "median_deg": float(np.median([e for e in errors if e is not None])) if any(e is not None for e in errors) else None,
-                   "max_deg": max((e for e in errors if e is not None), default=None)}
-            for pair, errors in summary.items()}
+            excess = record.get("two_view_turn_excess_deg", {}).get(pair)
+            summary.setdefault(pair, []).append((error, excess, record.get("finger")))
+    result = {}
+    for pair, rows in summary.items():
+        errors = [e for e, _, _ in rows if e is not None]
+        excess = [x for _, x, _ in rows if x is not None]
+        fingers = sorted({f for _, _, f in rows if f})
+        result[pair] = {"registered": len(errors), "captures": len(rows),
+                        "median_deg": float(np.median(errors)) if errors else None, "max_deg": max(errors, default=None),
+                        "wider": sum(x > 0 for x in excess), "signed": len(excess),
+                        "excess_median_deg": float(np.median(excess)) if excess else None,
+                        "by_finger": {finger: float(np.median(found)) if (found := [e for e, _, f in rows
+                                                                               if f == finger and e is not None]) else None
+                                      for finger in fingers} if len(fingers) > 1 else {}}
+    return result
 
 
 def real_table(records: list[dict], summary: dict) -> str:
@@ -258,9 +283,15 @@ def real_table(records: list[dict], summary: dict) -> str:
 
 
 def two_view_table(summary: dict) -> str:
-    """Two views fused alone, per view pair: registered captures and turn error against all three views."""
-    lines = ["| views fused alone | registered | turn error ° against the three-view fuse, median (max) |", "|---|---|---|"]
+    """Two views fused alone, per view pair: registered captures, turn error against all three views (and per finger),
+    and how many turned wider than with all three."""
+    lines = ["| views fused alone | registered | turn error ° against the three-view fuse, median (max) | per finger | "
+             "turned wider than with all views: captures, signed median ° |", "|---|---|---|---|---|"]
     for pair, entry in summary.get("two_views", {}).items():
         error = "–" if entry["median_deg"] is None else f"{entry['median_deg']:.2f} ({entry['max_deg']:.2f})"
-        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} |")
+        fingers = ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
+                            for finger, value in entry.get("by_finger", {}).items()) or "–"
+        signed = entry.get("signed", 0)
+        wider = (f"{entry['wider']} of {signed}, {entry['excess_median_deg']:+.2f}" if signed else "–")
+        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} | {fingers} | {wider} |")
     return "\n".join(lines)
