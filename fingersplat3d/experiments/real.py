@@ -231,17 +231,19 @@ def _two_view_summary(records: list[dict]) -> dict:
         for pair, error in record.get("two_view_turn_error_deg", {}).items():
             excess = record.get("two_view_turn_excess_deg", {}).get(pair)
             summary.setdefault(pair, []).append((error, excess, record.get("finger")))
+
+    def median(values: list[float]) -> float | None:
+        return float(np.median(values)) if values else None
+
     result = {}
     for pair, rows in summary.items():
         errors = [e for e, _, _ in rows if e is not None]
         excess = [x for _, x, _ in rows if x is not None]
         fingers = sorted({f for _, _, f in rows if f})
         result[pair] = {"registered": len(errors), "captures": len(rows),
-                        "median_deg": float(np.median(errors)) if errors else None, "max_deg": max(errors, default=None),
-                        "wider": sum(x > 0 for x in excess), "signed": len(excess),
-                        "excess_median_deg": float(np.median(excess)) if excess else None,
-                        "by_finger": {finger: float(np.median(found)) if (found := [e for e, _, f in rows
-                                                                               if f == finger and e is not None]) else None
+                        "median_deg": median(errors), "max_deg": max(errors, default=None),
+                        "wider": sum(x > 0 for x in excess), "signed": len(excess), "excess_median_deg": median(excess),
+                        "by_finger": {finger: median([e for e, _, f in rows if f == finger and e is not None])
                                       for finger in fingers} if len(fingers) > 1 else {}}
     return result
 
