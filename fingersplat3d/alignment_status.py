@@ -3,8 +3,8 @@ capture from a 15° one without ground truth (``report.json``'s ``alignment`` an
 stderr as well).
 
 Each warning stands on a figure the fit reports: the alignment's residual, each pair's turn uncertainty from the fit's
-curvature and its sensitivity to the focal (the focal probe), whether a view's outline closes at the fingertip, and
-the least turn the silhouettes allow. The thresholds and the measurements behind them are in docs/measurements.md
+curvature and its sensitivity to the focal (the focal probe), whether a view's outline closes at the fingertip,
+whether the views' shared skin closes a loop, and the least turn the silhouettes allow. The thresholds and the measurements behind them are in docs/measurements.md
 ("How sure it is"). Pure numpy on the alignment's own numbers.
 """
 from __future__ import annotations
@@ -19,13 +19,18 @@ from .scene import Capture
 from .segment.silhouette import TIP_BASES
 
 __all__ = ["MAX_RESIDUAL_PX", "MAX_TURN_UNCERTAINTY_DEG", "MAX_TURN_SENSITIVITY_DEG", "MAX_TURN_SHORTFALL_DEG", "AT_BOUND_DEG",
-           "NO_TIP_WARNING", "NO_TIP_SENSITIVITY_DEG", "alignment_status", "warn", "warn_without_tip"]
+           "SKIN_LOOP_MIN_MATCHES", "NO_LOOP_WARNING", "NO_TIP_WARNING", "NO_TIP_SENSITIVITY_DEG", "alignment_status",
+           "skin_loop", "warn", "warn_without_loop", "warn_without_tip"]
 
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
 MAX_TURN_SENSITIVITY_DEG = 1.5  # a pair turn that moves more than this under the focal probe is warned about
 MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
 AT_BOUND_DEG = 1.0  # two views turned less than this beyond their least turn are held there by the bound, not the photos
+SKIN_LOOP_MIN_MATCHES = 30
+"""A pair closes a loop of views with this many skin matches or more in the registration's last round (:func:`skin_loop`).
+Measured (docs/measurements.md, stop 99): the real rig's side cameras, 90 degrees apart, share 50-100 once the first
+alignment guides them; outer views 114 degrees apart share none."""
 
 
 def warn(report: dict, message: str) -> None:
@@ -84,12 +89,58 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
                  f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move)"
                  + _short_end_taken(probe) + "; the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     warn_without_tip(alignment, report)
+    warn_without_loop(alignment, status, report)
     _check_turns_against_widths(capture, alignment, status, report)
     return status
 
 
+def skin_loop(records: Sequence[dict], least: int = SKIN_LOOP_MIN_MATCHES) -> bool:
+    """Whether the registered pairs (``report.json``'s ``pairs``: ``a``, ``b``, ``ok``, ``matches`` per round) close a
+    loop of views on the skin they share: some cycle of views each of whose pairs matched ``least`` points or more in
+    its last round. Without one, each pair's turn rests on that pair alone, as two views' does."""
+    parent: dict[str, str] = {}
+
+    def root_of(name: str) -> str:
+        while parent.setdefault(name, name) != name:
+            name = parent[name]
+        return name
+
+    for record in records:
+        if not record.get("ok") or not record.get("matches") or record["matches"][-1] < least:
+            continue
+        a, b = root_of(record["a"]), root_of(record["b"])
+        if a == b:
+            return True
+        parent[a] = b
+    return False
+
+
+def warn_without_loop(alignment: GlobalAlignment, status: dict, report: dict) -> None:
+    """A warning where three views or more were aligned with the focal fitted (its probe ran) and their shared skin closes
+    no loop (:func:`skin_loop`): outer views too far apart to share skin leave each pair's turn to that pair's skin, the
+    pointmaps' shape and the focal, as with two views, and the probes above can read quiet (another make's fingers at
+    +-57 degrees, 45 mm away: 3.6 degrees off with the turns' curvature at 0.06 and their move under the focal probe
+    1.3; docs/measurements.md, stop 99). Not where no turn moves by :data:`NO_TIP_SENSITIVITY_DEG` with the focal
+    probed (nearly orthographic cameras, whose turns the skin holds whatever the focal: another group's renders)."""
+    if sum(alignment.aligned) < PIVOT_MIN_VIEWS or alignment.focal_probe is None:
+        return
+    status["skin_loop"] = skin_loop(report.get("pairs", []))
+    moves = alignment.turn_sensitivity_deg
+    steady = moves is not None and np.isfinite(moves).any() and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG
+    if not status["skin_loop"] and not steady:
+        shared = [f"{r['a']}-{r['b']}" for r in report.get("pairs", [])
+                  if r.get("ok") and r.get("matches") and r["matches"][-1] >= SKIN_LOOP_MIN_MATCHES]
+        warn(report, f"{NO_LOOP_WARNING} (only " + (", ".join(shared) or "no pair") + " share matched "
+                     "skin): each turn rests on its own pair's skin and on the pointmaps' shape, and follows the focal, "
+                     "as two views' do (another make's fingers 114° apart: up to 3.6° off with every other check "
+                     "quiet); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or views near "
+                     "enough that each shares skin with two others fix it")
+
+
 NO_TIP_WARNING = "no view shows the fingertip"
 """How the warning of :func:`warn_without_tip` begins."""
+NO_LOOP_WARNING = "the views' shared skin closes no loop"
+"""How the warning of :func:`warn_without_loop` begins."""
 
 
 NO_TIP_SENSITIVITY_DEG = 0.3

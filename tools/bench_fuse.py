@@ -46,7 +46,7 @@ def main() -> int:
     if args.csv:
         columns = ("case", "seed", "views", "status", "reason", "registered_all", "rotation_error_deg", "rotation_mean_deg",
                    "rotation_max_deg", "turn_uncertainty_max_deg", "turn_sensitivity_max_deg", "depth_mae_mm", "depth_worst_view_mm",
-                   "depth_two_views_mm", "depth_one_view_mm", "residual_px", "wall_s", "peak_rss_mb")
+                   "depth_two_views_mm", "depth_one_view_mm", "residual_px", "warned", "skin_loop", "wall_s", "peak_rss_mb")
         write_rows(args.csv, columns, rows)
     return 0
 

@@ -186,7 +186,8 @@ def _measure_case(case: GeometryCase, capture_paths: list[str], config) -> list[
             rows.append({**row, "status": "failed", "reason": f"{type(error).__name__}: {error}"})
             continue
         row.update(score_geometry(result, truth), status="done", wall_s=time.perf_counter() - started,
-                   residual_px=result.report["alignment"].get("residual_px"))
+                   residual_px=result.report["alignment"].get("residual_px"), warned=bool(result.report.get("warnings")),
+                   skin_loop=result.report["alignment"].get("skin_loop"))
         rows.append(row)
     for row in rows:
         row["peak_rss_mb"] = peak_rss_mb()
