@@ -4,8 +4,8 @@ stderr as well).
 
 Each warning stands on a figure the fit reports: the alignment's residual, each pair's turn uncertainty from the fit's
 curvature and its sensitivity to the focal (the focal probe), whether a view's outline closes at the fingertip,
-whether the views' shared skin closes a loop, and the least turn the silhouettes allow. The thresholds and the measurements behind them are in docs/measurements.md
-("How sure it is"). Pure numpy on the alignment's own numbers.
+whether the views' shared skin closes a loop, and the least turn the silhouettes allow. The thresholds and the
+measurements behind them are in docs/measurements.md ("How sure it is"). Pure numpy on the alignment's own numbers.
 """
 from __future__ import annotations
 
@@ -28,9 +28,9 @@ MAX_TURN_SENSITIVITY_DEG = 1.5  # a pair turn that moves more than this under th
 MAX_TURN_SHORTFALL_DEG = 5.0  # a pair turned this much less than its silhouettes allow is warned about (align/width_check.py)
 AT_BOUND_DEG = 1.0  # two views turned less than this beyond their least turn are held there by the bound, not the photos
 SKIN_LOOP_MIN_MATCHES = 30
-"""A pair closes a loop of views with this many skin matches or more in the registration's last round (:func:`skin_loop`).
-Measured (docs/measurements.md, stop 99): the real rig's side cameras, 90 degrees apart, share 50-100 once the first
-alignment guides them; outer views 114 degrees apart share none."""
+"""A pair closes a loop of views with this many skin matches or more in the registration's last round
+(:func:`skin_loop`). Measured (docs/measurements.md, stop 99): the real rig's side cameras, 90 degrees apart, share
+50-100 once the first alignment guides them; outer views 114 degrees apart share none."""
 
 
 def warn(report: dict, message: str) -> None:
@@ -106,7 +106,7 @@ def skin_loop(records: Sequence[dict], least: int = SKIN_LOOP_MIN_MATCHES) -> bo
         return name
 
     for record in records:
-        if not record.get("ok") or not record.get("matches") or record["matches"][-1] < least:
+        if not _shares_skin(record, least):
             continue
         a, b = root_of(record["a"]), root_of(record["b"])
         if a == b:
@@ -115,24 +115,30 @@ def skin_loop(records: Sequence[dict], least: int = SKIN_LOOP_MIN_MATCHES) -> bo
     return False
 
 
+def _shares_skin(record: dict, least: int) -> bool:
+    """Whether a pair of ``report.json``'s ``pairs`` was registered with ``least`` skin matches or more in its last
+    round."""
+    return bool(record.get("ok")) and bool(record.get("matches")) and record["matches"][-1] >= least
+
+
 def warn_without_loop(alignment: GlobalAlignment, status: dict, report: dict) -> None:
-    """A warning where three views or more were aligned with the focal fitted (its probe ran) and their shared skin closes
-    no loop (:func:`skin_loop`): outer views too far apart to share skin leave each pair's turn to that pair's skin, the
-    pointmaps' shape and the focal, as with two views, and the probes above can read quiet (another make's fingers at
-    +-57 degrees, 45 mm away: 3.6 degrees off with the turns' curvature at 0.06 and their move under the focal probe
-    1.3; docs/measurements.md, stop 99). Not where no turn moves by :data:`NO_TIP_SENSITIVITY_DEG` with the focal
-    probed (nearly orthographic cameras, whose turns the skin holds whatever the focal: another group's renders)."""
+    """A warning where three views or more were aligned with the focal fitted (its probe ran) and their shared skin
+    closes no loop (:func:`skin_loop`): outer views too far apart to share skin leave each pair's turn to that pair's
+    skin, the pointmaps' shape and the focal, as with two views, and the probes above can read quiet (another make's
+    fingers at +-57 degrees, 45 mm away: 3.6 degrees off with the turns' curvature at 0.06 and their move under the
+    focal probe 1.3; docs/measurements.md, stop 99). Not where no turn moves by :data:`NO_TIP_SENSITIVITY_DEG` with
+    the focal probed (nearly orthographic cameras, whose turns the skin holds whatever the focal: another group's
+    renders)."""
     if sum(alignment.aligned) < PIVOT_MIN_VIEWS or alignment.focal_probe is None:
         return
     status["skin_loop"] = skin_loop(report.get("pairs", []))
     moves = alignment.turn_sensitivity_deg
     steady = moves is not None and np.isfinite(moves).any() and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG
     if not status["skin_loop"] and not steady:
-        shared = [f"{r['a']}-{r['b']}" for r in report.get("pairs", [])
-                  if r.get("ok") and r.get("matches") and r["matches"][-1] >= SKIN_LOOP_MIN_MATCHES]
-        warn(report, f"{NO_LOOP_WARNING} (only " + (", ".join(shared) or "no pair") + " share matched "
-                     "skin): each turn rests on its own pair's skin and on the pointmaps' shape, and follows the focal, "
-                     "as two views' do (another make's fingers 114° apart: up to 3.6° off with every other check "
+        shared = [f"{r['a']}-{r['b']}" for r in report.get("pairs", []) if _shares_skin(r, SKIN_LOOP_MIN_MATCHES)]
+        warn(report, f"{NO_LOOP_WARNING} (only " + (", ".join(shared) or "no pair") + " share matched skin): "
+                     "each turn rests on its own pair's skin and on the pointmaps' shape, and follows the focal, as "
+                     "two views' do (another make's fingers 114° apart: up to 3.6° off with every other check "
                      "quiet); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or views near "
                      "enough that each shares skin with two others fix it")
 

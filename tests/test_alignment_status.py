@@ -1,4 +1,5 @@
-"""What a fuse says of its registration: whether the views' shared skin closes a loop, and the warning where it does not."""
+"""What a fuse says of its registration: whether the views' shared skin closes a loop, and the warning where it does
+not."""
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,14 +15,17 @@ def _pair(a, b, matches, ok=True):
     return {"a": a, "b": b, "ok": ok, "reason": "", "matches": list(matches)}
 
 
+SIDES = [_pair("l", "c", [400, 420]), _pair("c", "r", [380, 410])]
+
+
 @pytest.mark.parametrize("records, closed", [
-    ([_pair("l", "c", [400, 420]), _pair("c", "r", [380, 410]), _pair("l", "r", [0, 89])], True),  # the real rig's sides
-    ([_pair("l", "c", [400, 420]), _pair("c", "r", [380, 410]), _pair("l", "r", [245, 0])], False),  # matched first only
+    (SIDES + [_pair("l", "r", [0, 89])], True),  # the real rig's side cameras, matched once guided
+    (SIDES + [_pair("l", "r", [245, 0])], False),  # matched at the first guess only
     ([_pair("l", "c", [400]), _pair("c", "r", [410]), _pair("l", "r", [ENOUGH - 1])], False),
     ([_pair("l", "c", [400]), _pair("c", "r", [410]), _pair("l", "r", [ENOUGH])], True),
     ([_pair("l", "c", [400]), _pair("c", "r", [410]), _pair("l", "r", [300], ok=False)], False),  # refused: no loop
-    ([_pair("a", "b", [50]), _pair("b", "c", [50]), _pair("c", "d", [50]), _pair("d", "e", [50])], False),  # a chain of 5
-    ([_pair("a", "b", [50]), _pair("b", "c", [50]), _pair("c", "d", [50]), _pair("b", "d", [50])], True),  # a loop of 3 in 4
+    ([_pair(a, b, [50]) for a, b in ("ab", "bc", "cd", "de")], False),  # a chain of five views
+    ([_pair(a, b, [50]) for a, b in ("ab", "bc", "cd", "bd")], True),  # a loop of three in four
     ([_pair("l", "c", [])], False),
     ([], False),
 ])
@@ -34,8 +38,8 @@ def _alignment(views=3, probe=True, moves=1.3):
                            turn_sensitivity_deg=None if moves is None else np.full((views, views), moves))
 
 
-CHAIN = [_pair("l", "c", [400, 420]), _pair("c", "r", [380, 410]), _pair("l", "r", [245, 0])]
-LOOP = CHAIN[:2] + [_pair("l", "r", [0, 89])]
+CHAIN = SIDES + [_pair("l", "r", [245, 0])]
+LOOP = SIDES + [_pair("l", "r", [0, 89])]
 
 
 @pytest.mark.parametrize("alignment, records, loop, warned", [
