@@ -142,6 +142,25 @@ def test_two_view_turn_errors_compare_each_pair_alone_with_the_same_pair_in_all_
     assert "| 1, 2 | 0 of 2 | – | 1_1 –, 2_2 – | – |" in table
 
 
+def test_two_views_alone_are_measured_against_the_rig_mean_of_every_three_view_fuse():
+    """The pair's deviation from the rig mean (the three-view target's own measure): a three-view fuse off the rig does
+    not move it, as it moves the comparison with that same fuse."""
+    records = _records([(45, 45)] * 2 + [(47, 45)] + [(45, 45)] * 3, ["1_1"] * 3 + ["2_2"] * 3)  # one fuse 2° off
+    turn = lambda angle: Rotation.from_euler("y", angle, degrees=True).as_matrix().tolist()  # noqa: E731
+    for record, alone in zip(records, (46.0, 45.0, 45.0, 45.0, 48.0, 45.0)):  # pair 0-1 fused alone
+        record["two_view_turn_error_deg"] = {"01": abs(alone - record["angles_deg"]["01"])}
+        record["two_view_rotations"] = {"01": [turn(0.0), turn(alone)]}
+    summary = summarize_real(records)["two_views"]["01"]
+    assert summary["median_deg"] == pytest.approx(0.5)  # against each capture's own three-view fuse: 1, 0, 2, 0, 3, 0
+    # the rig mean is robust: the capture 2 degrees off pulls it by a twentieth of a degree at most
+    assert summary["rig_median_deg"] == pytest.approx(0.0, abs=0.06)
+    assert summary["rig_max_deg"] == pytest.approx(3.0, abs=0.06)
+    assert summary["rig_by_finger"] == {"1_1": pytest.approx(0.0, abs=0.06), "2_2": pytest.approx(0.0, abs=0.06)}
+    row = two_view_table({"two_views": {"01": summary}}).splitlines()[-1]
+    assert row.endswith(f"| {summary['rig_median_deg']:.2f} ({summary['rig_max_deg']:.2f}) | "
+                        f"1_1 {summary['rig_by_finger']['1_1']:.2f}, 2_2 {summary['rig_by_finger']['2_2']:.2f} |")
+
+
 def _square(x):
     return x * x
 

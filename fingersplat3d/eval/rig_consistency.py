@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PAIRS", "rig_consistency", "deviation_against"]
+__all__ = ["PAIRS", "rig_consistency", "deviation_against", "pair_deviation_deg"]
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -67,10 +67,6 @@ def deviation_against(records: list[dict], reference: list[dict]) -> dict:
     records of whole captures): other reconstructions of the same captures, matched by ``capture`` name, their
     cameras turned as the reference's portrait cameras were (a crop keeps its camera's orientation, not its aspect).
     Records of captures the reference lacks, or with a view unregistered, are left out."""
-    from scipy.spatial.transform import Rotation
-
-    from ..align.solve.rig import quarter_turn
-
     reference = [dict(r) for r in reference]
     rig = rig_consistency(reference)
     if not rig:
@@ -82,11 +78,22 @@ def deviation_against(records: list[dict], reference: list[dict]) -> dict:
         if whole is None or record["registered"] != 3:
             continue
         R = [np.asarray(pose)[:3, :3] for pose in record["world_to_cam"]]
-        if "roll_corrected" in whole:
-            k, sign = whole["roll_corrected"]["camera"], whole["roll_corrected"]["sign"]
-            R[k] = quarter_turn(sign % 4) @ R[k]
         for i, j in PAIRS:
-            mean = Rotation.from_matrix(np.asarray(rig[f"{i}{j}"]["mean_rotation"]))
-            deviation = (Rotation.from_matrix(R[j] @ R[i].T) * mean.inv()).magnitude()
-            result[f"{i}{j}"][record["capture"]] = float(np.degrees(deviation))
+            result[f"{i}{j}"][record["capture"]] = pair_deviation_deg(rig, whole, i, j, R[i], R[j])
     return result
+
+
+def pair_deviation_deg(rig: dict, whole: dict, i: int, j: int, rotation_i: np.ndarray, rotation_j: np.ndarray) -> float:
+    """How far (degrees) cameras ``i`` and ``j`` of one capture, with world-to-camera rotations ``rotation_i`` and
+    ``rotation_j`` from any reconstruction of it (two of its views fused alone, say), lie from the rig mean ``rig`` of
+    :func:`rig_consistency`; ``whole``: that capture's record there, whose portrait camera is turned alike."""
+    from scipy.spatial.transform import Rotation
+
+    from ..align.solve.rig import quarter_turn
+
+    R = {i: np.asarray(rotation_i, np.float64), j: np.asarray(rotation_j, np.float64)}
+    if "roll_corrected" in whole and whole["roll_corrected"]["camera"] in R:
+        k, sign = whole["roll_corrected"]["camera"], whole["roll_corrected"]["sign"]
+        R[k] = quarter_turn(sign % 4) @ R[k]
+    mean = Rotation.from_matrix(np.asarray(rig[f"{i}{j}"]["mean_rotation"]))
+    return float(np.degrees((Rotation.from_matrix(R[j] @ R[i].T) * mean.inv()).magnitude()))

@@ -175,6 +175,8 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
             twos[f"{i}{j}"] = fuse(Capture((capture.views[i], capture.views[j]), capture.metadata), config)
         record["two_view_turn_error_deg"] = two_view_turn_errors(three, twos)
         record["two_view_turn_excess_deg"] = two_view_turn_excess(three, twos)
+        record["two_view_rotations"] = {key: [c.world_to_cam[:3, :3].tolist() for c in two.cameras] if two.registered
+                                        else None for key, two in twos.items()}
     return record
 
 
@@ -198,7 +200,7 @@ def summarize_real(records: list[dict]) -> dict:
             "focal_spread": focal_spread(focals) if len(focals) > 1 else nan,
             "fuse_s_median": float(np.median([r["seconds"] for r in records])) if records else nan,
             "peak_rss_mb": max((r["peak_rss_mb"] for r in records), default=nan),
-            "two_views": _two_view_summary(records)}
+            "two_views": _two_view_summary(records, rig)}
 
 
 def sensitivity_against_deviation(records: list[dict], summary: dict) -> dict:
@@ -223,15 +225,23 @@ def sensitivity_against_deviation(records: list[dict], summary: dict) -> dict:
     return result
 
 
-def _two_view_summary(records: list[dict]) -> dict:
+def _two_view_summary(records: list[dict], rig: dict | None = None) -> dict:
     """Per view pair, over the captures measured with ``two_views``: how many registered alone, the median and largest
-    turn error against the three-view fuse, its median per finger (one tuned on, the other held out), and how many
-    came out turned wider than with all views (with the median of that signed difference)."""
-    summary = {}
+    turn error against the three-view fuse, its median per finger (one tuned on, the other held out), how many
+    came out turned wider than with all views (with the median of that signed difference), and, with the three-view
+    fuses' ``rig`` (:func:`~fingersplat3d.eval.rig_consistency.rig_consistency`), the pair's deviation from the rig
+    mean: the three-view target's own measure, free of each capture's own three-view error."""
+    from ..eval.rig_consistency import pair_deviation_deg
+
+    summary, against_rig = {}, {}
     for record in records:
         for pair, error in record.get("two_view_turn_error_deg", {}).items():
             excess = record.get("two_view_turn_excess_deg", {}).get(pair)
             summary.setdefault(pair, []).append((error, excess, record.get("finger")))
+            rotations = record.get("two_view_rotations", {}).get(pair)
+            if rig and pair in rig and rotations is not None and record["capture"] in rig[pair]["deviation_deg"]:
+                deviation = pair_deviation_deg(rig, record, int(pair[0]), int(pair[1]), *rotations)
+                against_rig.setdefault(pair, []).append((deviation, record.get("finger")))
 
     def median(values: list[float]) -> float | None:
         return float(np.median(values)) if values else None
@@ -246,6 +256,12 @@ def _two_view_summary(records: list[dict]) -> dict:
                         "wider": sum(x > 0 for x in excess), "signed": len(excess), "excess_median_deg": median(excess),
                         "by_finger": {finger: median([e for e, _, f in rows if f == finger and e is not None])
                                       for finger in fingers} if len(fingers) > 1 else {}}
+        deviations = against_rig.get(pair, [])
+        if deviations:
+            result[pair]["rig_median_deg"] = median([d for d, _ in deviations])
+            result[pair]["rig_max_deg"] = max(d for d, _ in deviations)
+            result[pair]["rig_by_finger"] = {finger: median([d for d, f in deviations if f == finger])
+                                             for finger in fingers} if len(fingers) > 1 else {}
     return result
 
 
@@ -289,12 +305,18 @@ def two_view_table(summary: dict) -> str:
     """Two views fused alone, per view pair: registered captures, turn error against all three views (and per finger),
     and how many turned wider than with all three."""
     lines = ["| views fused alone | registered | turn error ° against the three-view fuse, median (max) | per finger | "
-             "turned wider than with all views: captures, signed median ° |", "|---|---|---|---|---|"]
+             "turned wider than with all views: captures, signed median ° | deviation from the rig mean °, median (max) "
+             "| per finger |", "|---|---|---|---|---|---|---|"]
     for pair, entry in summary.get("two_views", {}).items():
         error = "–" if entry["median_deg"] is None else f"{entry['median_deg']:.2f} ({entry['max_deg']:.2f})"
         fingers = ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
                             for finger, value in entry.get("by_finger", {}).items()) or "–"
         signed = entry.get("signed", 0)
         wider = (f"{entry['wider']} of {signed}, {entry['excess_median_deg']:+.2f}" if signed else "–")
-        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} | {fingers} | {wider} |")
+        rig = ("–" if entry.get("rig_median_deg") is None
+               else f"{entry['rig_median_deg']:.2f} ({entry['rig_max_deg']:.2f})")
+        rig_fingers = ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
+                                for finger, value in entry.get("rig_by_finger", {}).items()) or "–"
+        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} | {fingers} "
+                     f"| {wider} | {rig} | {rig_fingers} |")
     return "\n".join(lines)
