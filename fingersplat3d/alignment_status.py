@@ -132,9 +132,7 @@ def warn_without_loop(alignment: GlobalAlignment, status: dict, report: dict) ->
     if sum(alignment.aligned) < PIVOT_MIN_VIEWS or alignment.focal_probe is None:
         return
     status["skin_loop"] = skin_loop(report.get("pairs", []))
-    moves = alignment.turn_sensitivity_deg
-    steady = moves is not None and np.isfinite(moves).any() and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG
-    if not status["skin_loop"] and not steady:
+    if not status["skin_loop"] and not _turns_steady(alignment):
         shared = [f"{r['a']}-{r['b']}" for r in report.get("pairs", []) if _shares_skin(r, SKIN_LOOP_MIN_MATCHES)]
         warn(report, f"{NO_LOOP_WARNING} (only " + (", ".join(shared) or "no pair") + " share matched skin): "
                      "each turn rests on its own pair's skin and on the pointmaps' shape, and follows the focal, as "
@@ -171,13 +169,19 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
     placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
     if alignment.focal_probe is None or len(placed) < 3 or any(tip is None for tip in placed):
         return
-    moves = alignment.turn_sensitivity_deg
-    if moves is not None and np.isfinite(moves).any() and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG:
+    if _turns_steady(alignment):
         return
     if all(tip["why"] != TIP_BASES["outline"] for tip in placed):
         warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest on the "
                      "skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % off); the "
                      "cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
+
+
+def _turns_steady(alignment: GlobalAlignment) -> bool:
+    """Whether the focal probe moved no turn by :data:`NO_TIP_SENSITIVITY_DEG` or more: nearly orthographic cameras,
+    whose turns the shared skin holds whatever the focal (the no-tip and no-loop warnings stand aside for them)."""
+    moves = alignment.turn_sensitivity_deg
+    return moves is not None and bool(np.isfinite(moves).any()) and np.nanmax(moves) < NO_TIP_SENSITIVITY_DEG
 
 
 def _per_pair(names: Sequence[str], values: np.ndarray, digits: int) -> dict[str, float]:

@@ -246,6 +246,11 @@ def _two_view_summary(records: list[dict], rig: dict | None = None) -> dict:
     def median(values: list[float]) -> float | None:
         return float(np.median(values)) if values else None
 
+    def by_finger(values: list[tuple[float | None, str | None]], fingers: list[str]) -> dict:
+        """The median of ``(value, finger)`` per finger (None values left out); {} with one finger or none."""
+        return {finger: median([v for v, f in values if f == finger and v is not None])
+                for finger in fingers} if len(fingers) > 1 else {}
+
     result = {}
     for pair, rows in summary.items():
         errors = [e for e, _, _ in rows if e is not None]
@@ -254,14 +259,12 @@ def _two_view_summary(records: list[dict], rig: dict | None = None) -> dict:
         result[pair] = {"registered": len(errors), "captures": len(rows),
                         "median_deg": median(errors), "max_deg": max(errors, default=None),
                         "wider": sum(x > 0 for x in excess), "signed": len(excess), "excess_median_deg": median(excess),
-                        "by_finger": {finger: median([e for e, _, f in rows if f == finger and e is not None])
-                                      for finger in fingers} if len(fingers) > 1 else {}}
+                        "by_finger": by_finger([(e, f) for e, _, f in rows], fingers)}
         deviations = against_rig.get(pair, [])
         if deviations:
             result[pair]["rig_median_deg"] = median([d for d, _ in deviations])
             result[pair]["rig_max_deg"] = max(d for d, _ in deviations)
-            result[pair]["rig_by_finger"] = {finger: median([d for d, f in deviations if f == finger])
-                                             for finger in fingers} if len(fingers) > 1 else {}
+            result[pair]["rig_by_finger"] = by_finger(deviations, fingers)
     return result
 
 
@@ -303,20 +306,24 @@ def real_table(records: list[dict], summary: dict) -> str:
 
 def two_view_table(summary: dict) -> str:
     """Two views fused alone, per view pair: registered captures, turn error against all three views (and per finger),
-    and how many turned wider than with all three."""
+    how many turned wider than with all three, and the deviation from the rig mean (and per finger)."""
     lines = ["| views fused alone | registered | turn error ° against the three-view fuse, median (max) | per finger | "
              "turned wider than with all views: captures, signed median ° | deviation from the rig mean °, median (max) "
              "| per finger |", "|---|---|---|---|---|---|---|"]
+
+    def per_finger(values: dict) -> str:
+        return ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
+                         for finger, value in values.items()) or "–"
+
+    def median_max(median: float | None, largest: float | None) -> str:
+        return "–" if median is None else f"{median:.2f} ({largest:.2f})"
+
     for pair, entry in summary.get("two_views", {}).items():
-        error = "–" if entry["median_deg"] is None else f"{entry['median_deg']:.2f} ({entry['max_deg']:.2f})"
-        fingers = ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
-                            for finger, value in entry.get("by_finger", {}).items()) or "–"
         signed = entry.get("signed", 0)
         wider = (f"{entry['wider']} of {signed}, {entry['excess_median_deg']:+.2f}" if signed else "–")
-        rig = ("–" if entry.get("rig_median_deg") is None
-               else f"{entry['rig_median_deg']:.2f} ({entry['rig_max_deg']:.2f})")
-        rig_fingers = ", ".join(f"{finger} {'–' if value is None else f'{value:.2f}'}"
-                                for finger, value in entry.get("rig_by_finger", {}).items()) or "–"
-        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} | {error} | {fingers} "
-                     f"| {wider} | {rig} | {rig_fingers} |")
+        lines.append(f"| {pair[0]}, {pair[1]} | {entry['registered']} of {entry['captures']} "
+                     f"| {median_max(entry['median_deg'], entry['max_deg'])} "
+                     f"| {per_finger(entry.get('by_finger', {}))} "
+                     f"| {wider} | {median_max(entry.get('rig_median_deg'), entry.get('rig_max_deg'))} "
+                     f"| {per_finger(entry.get('rig_by_finger', {}))} |")
     return "\n".join(lines)
