@@ -161,9 +161,15 @@ def test_explicit_files_are_used_as_given(tmp_path):
     cfpose = make_cfpose(tmp_path / "cfpose", fingers=("7",), poses=range(1, 5))
     (poses,) = load_any([cfpose / "7_4.bmp", cfpose / "7_1.png"])
     assert poses.names == ["p4", "p1"] and poses.metadata["poses"] == [4, 1]
-    with pytest.raises(InputError, match="missing frame 1"):  # a folder is a dataset: its groups must be whole
-        (tmp_path / "uwa" / "1_1_3_1.jpg").unlink()
+    (tmp_path / "uwa" / "1_1_3_1.jpg").unlink()
+    with pytest.raises(InputError, match="missing frame 1") as refused:  # a folder is a dataset: its groups must be whole
         load_any(uwa)
+    assert "give them as files" in str(refused.value)  # and the sentence says how to fuse the frames there alone
+    (partial,) = load_any([uwa / "1_1_3_0.jpg", uwa / "1_1_3_2.jpg"])  # which works
+    assert partial.names == ["f0", "f2"]
+    with pytest.raises(InputError, match="missing frame 1") as alone:  # one file alone: no folder to speak of
+        load_any(uwa / "1_1_3_0.jpg")
+    assert "give them as files" not in str(alone.value)
 
 
 def test_webp_photos_are_read_upright_and_heic_is_named_with_what_to_do(tmp_path):

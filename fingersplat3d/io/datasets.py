@@ -141,13 +141,16 @@ def load_uwa(folder_or_files: str | Path | Iterable[str | Path], subject: object
     ``lighting`` (view -> ``"plain"`` | ``"structured"``).
     """
     wanted = UWA_VIEW_FRAMES + (UWA_STRUCTURED_FRAMES if structured_light else ())
+    folder = isinstance(folder_or_files, (str, Path)) and Path(folder_or_files).is_dir()
+    # a folder is a dataset, its captures whole; files named one by one are fused as given (load_any)
+    hint = " (a folder is read as a dataset; to fuse only the frames there, give them as files)" if folder else ""
     captures = []
     for group in find_uwa_groups(folder_or_files, subject, finger, capture):
         for frame in wanted:
             if frame not in group.frames:
                 some = next(iter(group.frames.values()))
                 expected = some.with_name(f"{group.stem}_{frame}{some.suffix}")
-                raise input_error(expected, f"UWA {group.label} is missing frame {frame}")
+                raise input_error(expected, f"UWA {group.label} is missing frame {frame}{hint}")
         paths = [group.frames[frame] for frame in wanted]
         images = read_images(paths, gray)
         names = [f"f{frame}" for frame in wanted]
