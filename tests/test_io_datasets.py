@@ -162,7 +162,7 @@ def test_explicit_files_are_used_as_given(tmp_path):
     (poses,) = load_any([cfpose / "7_4.bmp", cfpose / "7_1.png"])
     assert poses.names == ["p4", "p1"] and poses.metadata["poses"] == [4, 1]
     (tmp_path / "uwa" / "1_1_3_1.jpg").unlink()
-    with pytest.raises(InputError, match="missing frame 1") as refused:  # a folder is a dataset: its groups must be whole
+    with pytest.raises(InputError, match="missing frame 1") as refused:  # a folder is a dataset: its groups whole
         load_any(uwa)
     assert "give them as files" in str(refused.value)  # and the sentence says how to fuse the frames there alone
     (partial,) = load_any([uwa / "1_1_3_0.jpg", uwa / "1_1_3_2.jpg"])  # which works
