@@ -20,7 +20,7 @@ from .segment.silhouette import TIP_BASES
 
 __all__ = ["MAX_RESIDUAL_PX", "MAX_TURN_UNCERTAINTY_DEG", "MAX_TURN_SENSITIVITY_DEG", "MAX_TURN_SHORTFALL_DEG", "AT_BOUND_DEG",
            "SKIN_LOOP_MIN_MATCHES", "NO_LOOP_WARNING", "NO_TIP_WARNING", "NO_TIP_SENSITIVITY_DEG", "alignment_status",
-           "skin_loop", "warn", "warn_without_loop", "warn_without_tip"]
+           "TWO_VIEWS_WARNING", "skin_loop", "warn", "warn_two_views", "warn_without_loop", "warn_without_tip"]
 
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
@@ -56,6 +56,7 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
         status.update(ok=False, reason=f"global alignment residual {alignment.residual_px:.1f} px")
         warn(report, f"global alignment residual is {alignment.residual_px:.1f} px (more than {MAX_RESIDUAL_PX:g} px): "
                      "the cameras are probably wrong")
+    said = len(report.get("warnings", []))  # the warnings about the turns follow
     if alignment.turn_uncertainty_deg is not None:
         status["turn_uncertainty_deg"] = _per_pair(names, alignment.turn_uncertainty_deg, 3)
         loose = {pair: value for pair, value in status["turn_uncertainty_deg"].items() if value > MAX_TURN_UNCERTAINTY_DEG}
@@ -91,6 +92,7 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
     warn_without_tip(alignment, report)
     warn_without_loop(alignment, status, report)
     _check_turns_against_widths(capture, alignment, status, report)
+    warn_two_views(alignment, report, turn_warned=len(report.get("warnings", [])) > said)
     return status
 
 
@@ -139,6 +141,26 @@ def warn_without_loop(alignment: GlobalAlignment, status: dict, report: dict) ->
                      "two views' do (another make's fingers 114° apart: up to 3.6° off with every other check "
                      "quiet); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or views near "
                      "enough that each shares skin with two others fix it")
+
+
+TWO_VIEWS_WARNING = "two views alone"
+"""How the warning of :func:`warn_two_views` begins."""
+
+
+def warn_two_views(alignment: GlobalAlignment, report: dict, turn_warned: bool) -> None:
+    """A warning where exactly two views were aligned without a rig and no other warning spoke of their turn (the
+    focal given, or taken from EXIF, and the fit's curvature quiet): where their skin does not overlap, the turn rests
+    on the pointmaps' section of the finger, which two photos cannot check, and no figure of the fit tells a pair that
+    turned off from one that did not (docs/measurements.md, stop 100: the fit's curvature and a softer solve's move
+    read alike on real pairs within 1 degree and 2-5 degrees off). So it is said of every such pair, with what it costs
+    on real fingers. Only where the fit reports its turns' curvature (``turn_uncertainty_deg``: the `prior` pointmaps'
+    registration without a rig; a rig's poses are its own)."""
+    if turn_warned or sum(alignment.aligned) != 2 or alignment.turn_uncertainty_deg is None:
+        return
+    warn(report, f"{TWO_VIEWS_WARNING}: where their skin does not overlap, the turn between them rests on the "
+                 "pointmaps' guess of the finger's section, which two photos cannot check, and the fit cannot tell how "
+                 "far off it is (real fingers 45° apart with the focal given: median 2°, up to 4.4°, where three views "
+                 "hold the same cameras within 1°; fingers whose section the guess fits: under 1°): a third view fixes it")
 
 
 NO_TIP_WARNING = "no view shows the fingertip"

@@ -1,12 +1,12 @@
 """What a fuse says of its registration: whether the views' shared skin closes a loop, and the warning where it does
-not."""
+not; the warning that two views alone rest their turn on the section."""
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from fingersplat3d.alignment_status import (NO_LOOP_WARNING, NO_TIP_SENSITIVITY_DEG, SKIN_LOOP_MIN_MATCHES, skin_loop,
-                                            warn_without_loop)
+from fingersplat3d.alignment_status import (NO_LOOP_WARNING, NO_TIP_SENSITIVITY_DEG, SKIN_LOOP_MIN_MATCHES,
+                                            TWO_VIEWS_WARNING, skin_loop, warn_two_views, warn_without_loop)
 
 ENOUGH = SKIN_LOOP_MIN_MATCHES
 
@@ -57,3 +57,25 @@ def test_views_whose_skin_closes_no_loop_are_warned_with_the_focal_fitted(alignm
     assert bool(said) == warned and status.get("skin_loop") is loop
     if warned:
         assert "only l-c, c-r share" in said[0] and "--focal-px" in said[0]
+
+
+def _two(aligned=(True, True), curvature=True):
+    n = len(aligned)
+    return SimpleNamespace(aligned=list(aligned), turn_uncertainty_deg=np.full((n, n), 0.1) if curvature else None)
+
+
+@pytest.mark.parametrize("alignment, turn_warned, warned", [
+    (_two(), False, True),  # two views, the focal given: nothing else speaks of their turn
+    (_two(), True, False),  # another warning already did (curvature, focal, least turn)
+    (_two((True, True, True)), False, False),  # three views hold their turns
+    (_two((True, True, False)), False, True),  # a third view lost: the two left are two views alone
+    (_two((True, False)), False, False),  # nothing was aligned to anything
+    (_two(curvature=False), False, False),  # a rig's poses (no curvature reported)
+])
+def test_two_views_alone_are_said_to_rest_on_the_section(alignment, turn_warned, warned):
+    report = {"warnings": []}
+    warn_two_views(alignment, report, turn_warned)
+    said = [w for w in report["warnings"] if w.startswith(TWO_VIEWS_WARNING)]
+    assert len(said) == int(warned)
+    if warned:
+        assert "third view" in said[0] and "--focal-px" not in said[0]

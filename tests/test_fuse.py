@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from fingersplat3d.alignment_status import TWO_VIEWS_WARNING
 from fingersplat3d.cli import main
 from fingersplat3d.errors import InputError
 from fingersplat3d.eval import depth_errors, relative_rotation_errors
@@ -479,6 +480,8 @@ def test_a_known_focal_is_kept_and_fixes_the_turn_of_two_views(uwa):
     error = relative_rotation_errors([c.world_to_cam for c in result.cameras], [v.camera.world_to_cam for v in uwa.views[:2]])
     assert max(error) < 1.5
     assert not any("--focal-px" in warning for warning in result.report["warnings"])
+    # ... and the run still says what two views cannot check: the section their turn rests on
+    assert any(warning.startswith(TWO_VIEWS_WARNING) for warning in result.report["warnings"])
 
 
 def test_two_views_with_the_focal_held_take_the_silhouette_contours():
