@@ -160,7 +160,8 @@ def warn_two_views(alignment: GlobalAlignment, report: dict, turn_warned: bool) 
     warn(report, f"{TWO_VIEWS_WARNING}: where their skin does not overlap, the turn between them rests on the "
                  "pointmaps' guess of the finger's section, which two photos cannot check, and the fit cannot tell how "
                  "far off it is (real fingers 45° apart with the focal given: median 2°, up to 4.4°, where three views "
-                 "hold the same cameras within 1°; fingers whose section the guess fits: under 1°): a third view fixes it")
+                 "hold the same cameras within 1°; fingers whose section the guess fits: under 1°): a third view "
+                 "fixes it")
 
 
 NO_TIP_WARNING = "no view shows the fingertip"
