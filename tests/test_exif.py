@@ -53,6 +53,26 @@ def test_a_photo_turned_by_its_orientation_tag(tmp_path):
     assert exif_focal(path, (300, 400)).focal_px == pytest.approx(26 / FULL_FRAME_DIAGONAL_MM * 500.0)
 
 
+def test_a_phones_heic_stored_sideways_gives_its_focal_upright(tmp_path):
+    """An iPhone's HEIC: stored 400 x 300 with its turn in the file (read upright as 300 x 400, the orientation tag
+    reset by pillow-heif), its EXIF the same as a JPEG's."""
+    from pillow_heif import register_heif_opener
+
+    from fingersplat3d.io.images import read_image
+
+    register_heif_opener()  # Pillow writes HEIC through it
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    ifd = exif.get_ifd(EXIF_IFD)
+    ifd[0xA405], ifd[0xA002], ifd[0xA003] = 26, 400, 300
+    pixels = (np.random.default_rng(0).random((300, 400, 3)) * 255).astype(np.uint8)
+    path = tmp_path / "IMG_0001.HEIC"
+    Image.fromarray(pixels).save(path, format="HEIF", exif=exif.tobytes(), quality=90)
+    assert read_image(path).shape == (400, 300, 3)
+    found = exif_focal(path, (300, 400))
+    assert found.focal_px == pytest.approx(26 / FULL_FRAME_DIAGONAL_MM * 500.0) and "35mm" in found.how
+
+
 @pytest.mark.parametrize("tags, why", [({}, "no EXIF"), ({"0xA405": 0}, "no EXIF focal"), ({"0xA405": -3}, "no EXIF focal"),
                                        ({"0xA405": 26, "0xA002": 4000, "0xA003": 2000}, "cropped"),
                                        ({"0x920A": 4.2}, "no EXIF focal")])

@@ -172,33 +172,46 @@ def test_explicit_files_are_used_as_given(tmp_path):
     assert "give them as files" not in str(alone.value)
 
 
-def test_webp_photos_are_read_upright_and_heic_is_named_with_what_to_do(tmp_path):
-    """A phone may save WebP (read, turned as its EXIF says, like a JPEG) or HEIC (not read: the error says so and
-    what to do, not just "not an image")."""
+def test_webp_and_heic_photos_are_read_upright_and_a_gif_is_named_with_what_to_do(tmp_path):
+    """A phone may save WebP or HEIC (an iPhone's default): both read, turned as the phone showed them (a WebP's EXIF
+    tag, a HEIC's own turn), a HEIC in a folder as any photo; a file named HEIC that is none says so; a GIF (a palette
+    of 256 colours) is named as not read, with what to do, not just "holds no images"."""
     from PIL import Image
+    from pillow_heif import register_heif_opener
 
+    register_heif_opener()
     rng = np.random.default_rng(0)
     stored = (rng.random((40, 64, 3)) * 255).astype(np.uint8)  # stored sideways, the tag turns it upright
+    stored = cv2.GaussianBlur(stored, (0, 0), 2.0)  # smooth enough for HEVC to keep it close
     exif = Image.Exif()
     exif[0x0112] = 6
     for name in ("a", "b"):
         Image.fromarray(stored).save(tmp_path / f"{name}.webp", exif=exif, lossless=True)
-    capture = load_image_folder([tmp_path / "a.webp", tmp_path / "b.webp"])
-    assert capture.names == ["a", "b"] and capture.views[0].image.shape[:2] == (64, 40)
-    (tmp_path / "c.heic").write_bytes(b"\x00\x00\x00\x18ftypheic")
-    with pytest.raises(InputError, match="HEIC photos are not read: save them as JPEG"):
-        load_image_folder([tmp_path / "a.webp", tmp_path / "c.heic"])
-    assert load_image_folder(tmp_path).names == ["a", "b"]  # a folder's HEIC beside them is left out, as any other file
-    only_heic = tmp_path / "iphone"
-    only_heic.mkdir()
-    (only_heic / "IMG_0001.HEIC").write_bytes(b"\x00\x00\x00\x18ftypheic")
-    with pytest.raises(InputError, match="holds no images .*its HEIC photos are not read: save them as JPEG"):
-        load_any(only_heic)
-    only_gif = tmp_path / "web"  # a palette of 256 colours: named too, not "holds no images" alone
+    Image.fromarray(stored).save(tmp_path / "c.heic", exif=exif.tobytes(), quality=95)  # written as the HEIF's own turn
+    capture = load_image_folder([tmp_path / "a.webp", tmp_path / "b.webp", tmp_path / "c.heic"])
+    assert capture.names == ["a", "b", "c"] and all(view.image.shape == (64, 40, 3) for view in capture.views)
+    webp, heic = capture.views[0].image, capture.views[2].image
+    assert np.abs(heic - webp).mean() < 0.03 and np.corrcoef(heic.ravel(), webp.ravel())[0, 1] > 0.9  # the same picture
+    assert load_image_folder(tmp_path).names == ["a", "b", "c"]  # a folder's HEIC is one of its photos
+    (tmp_path / "d.heic").write_bytes(b"\x00\x00\x00\x18ftypheic")
+    with pytest.raises(InputError, match="d.heic: not a readable HEIC/HEIF image"):
+        load_image_folder([tmp_path / "a.webp", tmp_path / "d.heic"])
+    only_gif = tmp_path / "web"
     only_gif.mkdir()
     Image.fromarray(stored).save(only_gif / "finger.gif")
     with pytest.raises(InputError, match="holds no images .*its GIF photos are not read: save them as JPEG"):
         load_any(only_gif)
+
+
+def test_heic_without_pillow_heif_says_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    from fingersplat3d.io.images import read_image
+
+    (tmp_path / "IMG_0001.HEIC").write_bytes(b"\x00\x00\x00\x18ftypheic")
+    monkeypatch.setitem(sys.modules, "pillow_heif", None)  # as in an environment without it
+    with pytest.raises(InputError, match="IMG_0001.HEIC: HEIC photos need the pillow-heif package"):
+        read_image(tmp_path / "IMG_0001.HEIC")
 
 
 def test_gray_stored_in_colour_is_read_gray_and_a_gif_is_refused_by_every_reader(tmp_path):

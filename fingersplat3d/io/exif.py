@@ -7,7 +7,9 @@ scaled down keeps its EXIF, so the focal is scaled with it (``PixelXDimension`` 
 image's size). A photo cropped to another shape cannot be placed in the full image: no focal then. Two views cannot
 fix the focal themselves (their turn follows it; docs/measurements.md), so a focal the camera wrote is worth having.
 
-Read with Pillow (a dependency of the package); an unreadable or odd EXIF is never an error, only no focal.
+Read with Pillow (a dependency of the package; HEIC/HEIF through pillow-heif, whose images come upright with the
+orientation tag reset, the stored size's quarter turn then found as an editor's is); an unreadable or odd EXIF is never
+an error, only no focal.
 """
 from __future__ import annotations
 
@@ -62,6 +64,10 @@ def _exif_focal(path: str | Path, size: tuple[int, int]) -> ExifFocal:
     try:
         from PIL import Image
 
+        if Path(path).suffix.lower() in (".heic", ".heif"):  # a phone's HEIC: Pillow reads its EXIF through pillow-heif
+            from pillow_heif import register_heif_opener
+
+            register_heif_opener()
         with Image.open(path) as image:
             exif = image.getexif()
             stored = image.size  # as stored, before the orientation tag turns it

@@ -1,4 +1,5 @@
-"""Images and masks on disk: 8- or 16-bit PNG/JPEG/TIFF/BMP, grayscale or RGB.
+"""Images and masks on disk: 8- or 16-bit PNG/JPEG/TIFF/BMP/WebP, and the HEIC/HEIF photos phones save (through
+pillow-heif: OpenCV's build has no HEVC decoder), grayscale or RGB.
 
 Images are read as float32 in [0, 1]; grayscale stays ``H x W``, colour becomes ``H x W x 3``
 in RGB order. Masks are ``H x W`` bool (any non-zero pixel is inside).
@@ -13,14 +14,16 @@ import numpy as np
 from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "read_images",
+__all__ = ["HEIF_SUFFIXES", "IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "read_images",
            "write_image", "read_mask", "write_mask"]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
-UNREAD_SUFFIXES = {".heic": "HEIC", ".heif": "HEIF", ".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw",
-                   ".arw": "raw", ".gif": "GIF"}
-"""Photo formats a phone or camera may write that are not read here (OpenCV's build has no decoder for them, or, GIF,
-a palette of 256 colours): named in the error, with what to do, by every command that reads a photo
+HEIF_SUFFIXES = (".heic", ".heif")
+"""The photos an iPhone (and many Android phones) save by default: HEVC in a HEIF box, decoded by pillow-heif
+(libheif), upright as the phone showed them, their EXIF (the focal, :mod:`.exif`) read alike."""
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp") + HEIF_SUFFIXES
+UNREAD_SUFFIXES = {".avif": "AVIF", ".dng": "raw DNG", ".cr2": "raw", ".nef": "raw", ".arw": "raw", ".gif": "GIF"}
+"""Photo formats a phone or camera may write that are not read here (neither OpenCV's build nor pillow-heif decodes
+them, or, GIF, a palette of 256 colours): named in the error, with what to do, by every command that reads a photo
 (:func:`read_image` as well as the capture loaders: ``fs3d print`` had read a GIF that ``fs3d fuse`` refused)."""
 NEAR_GRAY = 2.0 / 255.0
 """A colour image whose three channels lie within this of each other at every pixel is a gray one stored in colour (a
@@ -65,6 +68,8 @@ def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
         raise input_error(path, unread_photos([UNREAD_SUFFIXES[path.suffix.lower()]]))
     if path.stat().st_size == 0:
         raise input_error(path, "file is empty")
+    if path.suffix.lower() in HEIF_SUFFIXES:
+        return _read_heif(path)
     data = path.read_bytes()
     # Checked before decoding: OpenCV would fill the missing rows grey and print libjpeg's complaint above the error.
     if path.suffix.lower() in (".jpg", ".jpeg") and _jpeg_truncated(data):
@@ -73,6 +78,24 @@ def _read_raw(path: Path, upright: bool = False) -> np.ndarray:
     if raw is None or raw.size == 0:
         raise input_error(path, "not a readable image (corrupt or unsupported format)")
     return raw
+
+
+def _read_heif(path: Path) -> np.ndarray:
+    """A HEIC/HEIF photo's main image as OpenCV would give it (uint8, BGR or one channel, no alpha), upright: libheif
+    applies the file's own turn and mirror (a phone's portrait shot is stored sideways), as every viewer does. HDR
+    photos (10 or 12 bits) come down to 8, as a viewer shows them."""
+    try:
+        import pillow_heif
+    except ImportError:  # a dependency, but an environment may lack it: say what to do, not "not an image"
+        raise input_error(path, "HEIC photos need the pillow-heif package (pip install pillow-heif), or save them as "
+                                "JPEG or PNG first (keeping their EXIF)") from None
+    try:
+        pixels = np.asarray(pillow_heif.open_heif(path, convert_hdr_to_8bit=True))
+    except Exception as error:  # noqa: BLE001 - libheif's errors vary by release; any of them is an unreadable file
+        raise input_error(path, f"not a readable HEIC/HEIF image ({str(error).strip() or type(error).__name__})") from None
+    if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
+        return np.ascontiguousarray(pixels[..., 2::-1])  # RGB(A) -> BGR, the alpha dropped
+    return np.ascontiguousarray(pixels.reshape(pixels.shape[:2]))
 
 
 def _jpeg_truncated(data: bytes) -> bool:
