@@ -93,9 +93,9 @@ def _read_heif(path: Path) -> np.ndarray:
         pixels = np.asarray(pillow_heif.open_heif(path, convert_hdr_to_8bit=True))
     except Exception as error:  # noqa: BLE001 - libheif's errors vary by release; any of them is an unreadable file
         raise input_error(path, f"not a readable HEIC/HEIF image ({str(error).strip() or type(error).__name__})") from None
-    if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
+    if pixels.ndim == 3 and pixels.shape[2] >= 3:
         return np.ascontiguousarray(pixels[..., 2::-1])  # RGB(A) -> BGR, the alpha dropped
-    return np.ascontiguousarray(pixels.reshape(pixels.shape[:2]))
+    return np.ascontiguousarray(pixels[..., 0] if pixels.ndim == 3 else pixels)  # grey (with alpha)
 
 
 def _jpeg_truncated(data: bytes) -> bool:
