@@ -182,22 +182,34 @@ def _short_end_taken(probe: dict | None) -> str:
     return f"; the focal is taken at the short end of what fits, {taken:.2f} of where the fit slid" if taken else ""
 
 def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
-    """A warning where three views or more were aligned with the focal fitted and no registered view's outline closes
-    at the tip (each cut by the frame at both ends): what holds the turns is then the skin the views share alone. Real
-    crops without the tip come out 1-5 degrees off with their photos seeming to hold the focal (docs/measurements.md,
-    stop 78), so the probes above do not catch them all. Not where the focal probe found every turn steady whatever
-    the focal (:data:`NO_TIP_SENSITIVITY_DEG`): nearly orthographic crops, whose turns the shared skin holds alone."""
+    """A warning where three views or more were aligned without a rig and no registered view's outline closes at the
+    tip (each cut by the frame at both ends): what holds the turns is then the skin the views share alone. Real crops
+    without the tip come out 1-5 degrees off with their photos seeming to hold the focal (docs/measurements.md, stop
+    78), so the probes above do not catch them all; and 2-3 degrees off at the median (up to 7) with the rig's focal
+    given (stop 99), where no probe runs: they are warned too, with the remedy a known focal cannot give. With the
+    focal fitted, not where the focal probe found every turn steady whatever the focal (:data:`NO_TIP_SENSITIVITY_DEG`):
+    nearly orthographic crops, whose turns the shared skin holds alone. Not with a rig (its poses are its own: no
+    curvature is reported then)."""
     tips = report.get("registration", {}).get("tip", {})
     names = report.get("views", [])
     placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
-    if alignment.focal_probe is None or len(placed) < 3 or any(tip is None for tip in placed):
+    focal_given = alignment.focal_probe is None
+    if focal_given and getattr(alignment, "turn_uncertainty_deg", None) is None:  # a rig (or no fit to speak of)
         return
-    if _turns_steady(alignment):
+    if len(placed) < 3 or any(tip is None for tip in placed):
+        return
+    if not focal_given and _turns_steady(alignment):
         return
     if all(tip["why"] != TIP_BASES["outline"] for tip in placed):
-        warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest on the "
-                     "skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % off); the "
-                     "cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
+        if focal_given:
+            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns rest on the skin the "
+                         "views share alone, and the focal given does not hold the finger's tilt (real crops without "
+                         "a tip with the rig's focal given: turns 2-3° off, up to 7°); a rig (--rig) or photos that "
+                         "show the fingertip fix it")
+        else:
+            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest on "
+                         "the skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % "
+                         "off); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
 
 
 def _turns_steady(alignment: GlobalAlignment) -> bool:

@@ -535,7 +535,9 @@ STEADY, LOOSE = np.full((3, 3), 0.01), np.array([[np.nan, 0.2, 0.9], [0.2, np.na
     (("taper", "other views", "other views"), {"held": True}, LOOSE, True),  # one pair follows the focal
     (("taper", "other views", "other views"), {"held": True}, STEADY, False),  # no turn follows it (orthographic)
     (("outline", "other views", "other views"), {"held": True}, LOOSE, False),  # one view's outline closes at the tip
-    (("taper", "taper", "taper"), None, None, False),  # the focal given (no probe): nothing to warn of
+    (("taper", "taper", "taper"), None, None, True),  # the focal given (no probe): real crops still 2-7° off
+    (("outline", "taper", "taper"), None, None, False),  # ... where one view shows the tip, not
+    (("taper", "taper", "taper"), "rig", None, False),  # a rig holds the poses (no curvature reported)
 ])
 def test_a_capture_without_a_visible_tip_is_warned(bases, probe, moves, warned):
     from types import SimpleNamespace
@@ -547,5 +549,11 @@ def test_a_capture_without_a_visible_tip_is_warned(bases, probe, moves, warned):
     names = ["left", "center", "right"]
     report = {"views": names, "warnings": [],
               "registration": {"tip": {n: {"side": "left", "why": TIP_BASES[b]} for n, b in zip(names, bases)}}}
-    warn_without_tip(SimpleNamespace(aligned=[True, True, True], focal_probe=probe, turn_sensitivity_deg=moves), report)
-    assert any(w.startswith(NO_TIP_WARNING) and "--focal-px" in w for w in report["warnings"]) == warned
+    curvature = None if probe == "rig" else np.full((3, 3), 0.05)
+    alignment = SimpleNamespace(aligned=[True, True, True], focal_probe=None if probe == "rig" else probe,
+                                turn_sensitivity_deg=moves, turn_uncertainty_deg=curvature)
+    warn_without_tip(alignment, report)
+    said = [w for w in report["warnings"] if w.startswith(NO_TIP_WARNING)]
+    assert bool(said) == warned
+    if said:  # the remedy: the focal where it was fitted, a rig or the tip where it was given
+        assert ("--focal-px" in said[0]) == (probe is not None) and ("--rig" in said[0])
