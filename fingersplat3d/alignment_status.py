@@ -159,9 +159,9 @@ def warn_two_views(alignment: GlobalAlignment, report: dict, turn_warned: bool) 
         return
     warn(report, f"{TWO_VIEWS_WARNING}: where their skin does not overlap, the turn between them rests on the "
                  "pointmaps' guess of the finger's section, which two photos cannot check, and the fit cannot tell how "
-                 "far off it is (real fingers 45° apart with the focal given: median 2°, up to 4.4°, where three views "
-                 "hold the same cameras within 1°; fingers whose section the guess fits: under 1°): a third view "
-                 "fixes it")
+                 "far off it is (real fingers 45° apart with the focal given: median 2°, up to 4.4°, where three "
+                 "views hold the same cameras within 1°; fingers whose section the guess fits: under 1°): a third "
+                 "view fixes it")
 
 
 NO_TIP_WARNING = "no view shows the fingertip"
@@ -207,9 +207,9 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
                          "a tip with the rig's focal given: turns 2-3° off, up to 7°); a rig (--rig) or photos that "
                          "show the fingertip fix it")
         else:
-            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest on "
-                         "the skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to 50 % "
-                         "off); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
+            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest "
+                         "on the skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to "
+                         "50 % off); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
 
 
 def _turns_steady(alignment: GlobalAlignment) -> bool:
