@@ -155,7 +155,7 @@ def warn_two_views(alignment: GlobalAlignment, report: dict, turn_warned: bool) 
     read alike on real pairs within 1 degree and 2-5 degrees off). So it is said of every such pair, with what it costs
     on real fingers. Only where the fit reports its turns' curvature (``turn_uncertainty_deg``: the `prior` pointmaps'
     registration without a rig; a rig's poses are its own)."""
-    if turn_warned or sum(alignment.aligned) != 2 or alignment.turn_uncertainty_deg is None:
+    if turn_warned or sum(alignment.aligned) != 2 or not _fitted_without_rig(alignment):
         return
     warn(report, f"{TWO_VIEWS_WARNING}: where their skin does not overlap, the turn between them rests on the "
                  "pointmaps' guess of the finger's section, which two photos cannot check, and the fit cannot tell how "
@@ -194,22 +194,26 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
     names = report.get("views", [])
     placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
     focal_given = alignment.focal_probe is None
-    if focal_given and getattr(alignment, "turn_uncertainty_deg", None) is None:  # a rig (or no fit to speak of)
+    if focal_given and not _fitted_without_rig(alignment):
         return
     if len(placed) < 3 or any(tip is None for tip in placed):
         return
     if not focal_given and _turns_steady(alignment):
         return
     if all(tip["why"] != TIP_BASES["outline"] for tip in placed):
-        if focal_given:
-            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns rest on the skin the "
-                         "views share alone, and the focal given does not hold the finger's tilt (real crops without "
-                         "a tip with the rig's focal given: turns 2-3° off, up to 7°); a rig (--rig) or photos that "
-                         "show the fingertip fix it")
-        else:
-            warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): the turns and the focal rest "
-                         "on the skin the views share alone (real crops without a tip: turns 1-5° off, the focal up to "
-                         "50 % off); the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) helps")
+        said = (("the turns rest on the skin the views share alone, and the focal given does not hold the finger's "
+                 "tilt (real crops without a tip with the rig's focal given: turns 2-3° off, up to 7°); a rig (--rig) "
+                 "or photos that show the fingertip fix it") if focal_given else
+                ("the turns and the focal rest on the skin the views share alone (real crops without a tip: turns "
+                 "1-5° off, the focal up to 50 % off); the cameras' focal (--focal-px, --rig, or photos whose EXIF "
+                 "records it) helps"))
+        warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): {said}")
+
+
+def _fitted_without_rig(alignment: GlobalAlignment) -> bool:
+    """Whether the turns were fitted to the photos' matches on the `prior` pointmaps, with no rig holding the poses:
+    only such a fit reports its turns' curvature (``turn_uncertainty_deg``; None with a rig or the dust3r backend)."""
+    return alignment.turn_uncertainty_deg is not None
 
 
 def _turns_steady(alignment: GlobalAlignment) -> bool:

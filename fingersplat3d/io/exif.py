@@ -64,7 +64,9 @@ def _exif_focal(path: str | Path, size: tuple[int, int]) -> ExifFocal:
     try:
         from PIL import Image
 
-        if Path(path).suffix.lower() in (".heic", ".heif"):  # a phone's HEIC: Pillow reads its EXIF through pillow-heif
+        from .images import HEIF_SUFFIXES
+
+        if Path(path).suffix.lower() in HEIF_SUFFIXES:  # a phone's HEIC: Pillow reads its EXIF through pillow-heif
             from pillow_heif import register_heif_opener
 
             register_heif_opener()
