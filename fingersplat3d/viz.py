@@ -114,6 +114,32 @@ def _view_tile(image: np.ndarray, backing: np.ndarray | None) -> np.ndarray:
     return tinted.astype(np.uint8)
 
 
+_LABEL_GAP = 14
+"""Pixels between a camera's dot and its name in the rig picture."""
+
+
+def _label_box(dot: tuple[int, int], xy: np.ndarray, text_size: tuple[int, int]) -> tuple[int, int]:
+    """Where a camera's name goes (cv2.putText's origin: the text's bottom left) beyond its dot at pixel ``dot``, away
+    from the finger (``xy``: the camera's place about it, any scale), before any clamping."""
+    outward = xy / max(float(np.linalg.norm(xy)), 1e-12)
+    width, height = text_size
+    x = dot[0] + _LABEL_GAP * outward[0] - width * (outward[0] < -0.3) - width / 2 * (abs(outward[0]) <= 0.3)
+    y = dot[1] + _LABEL_GAP * outward[1] + height * (outward[1] > 0.3) + height / 2 * (abs(outward[1]) <= 0.3)
+    return int(x), int(y)
+
+
+def _label_origin(dot: tuple[int, int], xy: np.ndarray, text_size: tuple[int, int], size: int) -> tuple[int, int]:
+    """Where a camera's name goes in the ``size`` square rig picture: beside its dot (:func:`_label_box`) where it fits;
+    else (a long file name beside a camera at the picture's side) above the dot, or below one in the lower half, moved
+    in from the picture's edge rather than cut there."""
+    x, y = _label_box(dot, xy, text_size)
+    width, height = text_size
+    if x < 2 or x + width > size - 2:
+        x = int(dot[0] - width / 2)
+        y = dot[1] - _LABEL_GAP if xy[1] <= 0 else dot[1] + _LABEL_GAP + height
+    return min(max(x, 2), max(2, size - 2 - width)), min(max(y, height + 2), size - 4)
+
+
 def _rig_tile(cameras: list, names: list[str], aligned: list[bool], size: int = 300) -> np.ndarray | None:
     """The placed cameras seen along the finger (the normal of the plane their optical axes span), around the point
     nearest to all their axes; None with fewer than two placed cameras or axes all parallel."""
@@ -140,12 +166,9 @@ def _rig_tile(cameras: list, names: list[str], aligned: list[bool], size: int = 
     for k, xy in zip(placed, flat):
         cv2.line(tile, to_pixels(xy), to_pixels(np.zeros(2)), (170, 170, 170), 1, cv2.LINE_AA)
         cv2.circle(tile, to_pixels(xy), 6, (40, 80, 200), -1, cv2.LINE_AA)
-        outward = xy / max(float(np.linalg.norm(xy)), 1e-12)  # the name beyond the camera, away from the finger
-        (width, height), _ = cv2.getTextSize(names[k], cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
-        x, y = to_pixels(xy)
-        x, y = int(x + 14 * outward[0] - width * (outward[0] < -0.3) - width / 2 * (abs(outward[0]) <= 0.3)), \
-            int(y + 14 * outward[1] + height * (outward[1] > 0.3) + height / 2 * (abs(outward[1]) <= 0.3))
-        cv2.putText(tile, names[k], (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (30, 30, 30), 1, cv2.LINE_AA)
+        text_size = cv2.getTextSize(names[k], cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0]
+        origin = _label_origin(to_pixels(xy), xy, text_size, size)
+        cv2.putText(tile, names[k], origin, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (30, 30, 30), 1, cv2.LINE_AA)
     return tile
 
 

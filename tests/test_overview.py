@@ -69,3 +69,26 @@ def test_turn_lines_wrap_after_their_commas_within_the_tile():
     assert len(parts) == 2 and parts[0].endswith(",") and parts[1].startswith("   moves")
     assert all(cv2.getTextSize(p, cv2.FONT_HERSHEY_SIMPLEX, 0.42, 1)[0][0] <= 250 for p in parts)
     assert _wrapped("one-part-wider-than-the-tile", 10, 0.42) == ["one-part-wider-than-the-tile"]
+
+
+def test_long_camera_names_stay_inside_the_rig_drawing():
+    """File names as long as another group's (``sample2_-45``) beside cameras on either side of the finger: each name
+    whole in the drawing (above its dot where there is no room beside it), none cut at the drawing's edge."""
+    from fingersplat3d.viz import _label_origin, _rig_tile
+
+    names = ["sample2_-45", "sample2_0", "sample2_47"]
+    tile = _rig_tile(_ring(3), names, [True] * 3)
+    ink = tile.min(2) < 100  # the names' dark text (the dots are blue, the lines light grey)
+    assert ink.any() and not ink[:, :3].any() and not ink[:, -3:].any() and not ink[:3].any() and not ink[-3:].any()
+    # cameras all round, names a third of the drawing wide: each name inside it and clear of its dot (radius 6)
+    size = 300
+    for angle in np.radians(np.arange(0, 360, 15)):
+        xy = np.array([np.cos(angle), np.sin(angle)])
+        dot = tuple(int(v) for v in np.round(size / 2 + 0.38 * size * xy))
+        x, y = _label_origin(dot, xy, (100, 12), size)
+        assert 2 <= x and x + 100 <= size - 2 and 14 <= y <= size - 4
+        nearest = np.clip(dot, [x, y - 12], [x + 100, y])  # the point of the name's box nearest the dot
+        assert np.hypot(*(nearest - np.array(dot))) > 6, (np.degrees(angle), dot, x, y)
+    # a short name beside its dot, as before; a name wider than the drawing starts at its edge
+    assert _label_origin((36, 150), np.array([-1.0, 0.0]), (20, 12), size) == (2, 156)
+    assert _label_origin((264, 150), np.array([1.0, 0.0]), (400, 12), size)[0] == 2
