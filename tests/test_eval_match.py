@@ -134,6 +134,10 @@ def test_real_captures_make_prints_nfiq2_scores_and_a_table(real_dev, tmp_path):
     assert "| real | 2 | 4 |" in (out / "summary.md").read_text()
 
 
+def _gallery_rows(out):
+    return [r for r in csv.DictReader((out / "scores.csv").open()) if r["protocol"] == "photos vs gallery"]
+
+
 def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
     """Two shipped synthetic fingers: their front photos and the rolled prints of their true models, against their
     true rolled prints as a contact gallery (named by finger)."""
@@ -165,8 +169,49 @@ def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
     flat = [(int(r["score"]), r["genuine"]) for r in csv.DictReader((tmp_path / "flat" / "scores.csv").open())
             if r["protocol"] == "photos vs gallery"]
     assert min(s for s, g in flat if g == "1") > max(s for s, g in flat if g == "0")
+    # The default reads the gallery's way round from the scores: these true rolled prints keep a photo's handedness
+    assert all(r["mirrored"] == "0" for r in gallery_rows)
+    assert "compared as they are (the gallery's way round read from the scores" in (out / "summary.md").read_text()
     assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--mirror", "-o", str(out), "--overwrite"]) == 0
-    mirrored = [r for r in csv.DictReader((out / "scores.csv").open()) if r["protocol"] == "photos vs gallery"]
+    mirrored = _gallery_rows(out)
     assert max(int(r["score"]) for r in mirrored if r["genuine"] == "1") < min(genuine)  # handedness matters
+    assert all(r["mirrored"] == "1" for r in mirrored)
+    assert "as --mirror or --no-mirror fixes it" in (out / "summary.md").read_text()
+    # A gallery the other way round (as inked or live-scan prints are): found so, and the photos mirrored to meet it
+    inked = tmp_path / "inked"
+    inked.mkdir()
+    for path in gallery.iterdir():
+        cv2.imwrite(str(inked / path.name), cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)[:, ::-1])
+    assert main(["eval", "match", str(probes), "--gallery", str(inked), "-o", str(tmp_path / "found")]) == 0
+    found = _gallery_rows(tmp_path / "found")
+    found_genuine = [int(r["score"]) for r in found if r["genuine"] == "1"]
+    assert all(r["mirrored"] == "1" for r in found)
+    assert min(found_genuine) > max(int(r["score"]) for r in found if r["genuine"] == "0")
+    assert main(["eval", "match", str(probes), "--gallery", str(inked), "--no-mirror",
+                 "-o", str(tmp_path / "as_is")]) == 0
+    as_is = _gallery_rows(tmp_path / "as_is")
+    assert all(r["mirrored"] == "0" for r in as_is)
+    assert max(int(r["score"]) for r in as_is if r["genuine"] == "1") < min(found_genuine)
     assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--gallery-naming", "(?P<who>.+)",
                  "-o", str(tmp_path / "o2")]) == 2
+
+
+def test_a_galleries_handedness_is_read_from_the_best_scores_alone():
+    from fingersplat3d.eval.handedness import gallery_handedness, median_best
+
+    nan = float("nan")
+    # three probes, four gallery prints: the right way round each probe's best is its own finger's print
+    as_is = np.array([[7.0, 9, 6, 8], [5, 6, 8, 7], [9, 5, 6, 6]])
+    mirrored = np.array([[40.0, 9, 6, 8], [5, 31, 8, 7], [9, 5, 6, 12]])
+    way = gallery_handedness(as_is, mirrored)
+    assert way.mirrored and way.best_mirrored == 31.0 and way.best_as_is == 9.0  # medians of the rows' best
+    assert not gallery_handedness(mirrored, as_is).mirrored
+    # a tie, or nothing told apart: kept as they are; a probe with no minutiae (a NaN row) is left out
+    assert not gallery_handedness(as_is, as_is).mirrored
+    with_gap = np.vstack([mirrored, [nan] * 4])
+    assert median_best(with_gap) == median_best(mirrored) == 31.0
+    # one way never compared (every template empty): the other is taken, and no comparison at all keeps them as they are
+    assert gallery_handedness(np.full((2, 3), nan), mirrored[:2]).mirrored
+    assert not gallery_handedness(np.full((2, 3), nan), np.full((2, 3), nan)).mirrored
+    with pytest.raises(ValueError, match="probes, gallery"):
+        median_best(np.zeros(3))

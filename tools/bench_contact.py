@@ -1,6 +1,6 @@
 """Contactless against contact on synthetic fingers: photos and rolled-equivalent prints against true rolled prints.
 
-    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR] [--flat]
+    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR] [--flat] [--inked] [--mirror auto|yes|no]
 
 Per seed: an ``fs3d synth`` finger on the uwa rig (1280x1024), its three photos renamed in the UWA naming
 (finger ``<seed>_1``, frame 0 the front camera), a geometry-only fuse of the photos alone (no cameras, no
@@ -28,8 +28,10 @@ FRAMES = {"center": 0, "left": 1, "right": 2}
 
 def main() -> int:
     from fingersplat3d.eval.machine import machine
-    from fingersplat3d.experiments.match import parse_samples, read_gallery, run_match_evaluation, summary_markdown
+    from fingersplat3d.experiments.match import (MIRROR_CHOICES, parse_samples, read_gallery, run_match_evaluation,
+                                                 summary_markdown)
     from fingersplat3d.io.capture import write_capture
+    from fingersplat3d.io.images import read_image, write_image
     from fingersplat3d.io.datasets import load_any
     from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
     from fingersplat3d.synth import SynthConfig, synthesize
@@ -38,6 +40,11 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--work", type=Path, help="folder to keep captures and reconstructions in, and reuse")
     parser.add_argument("--flat", action="store_true", help="the photos' prints scaled and turned, not unrolled")
+    parser.add_argument("--inked", action="store_true",
+                        help="the gallery's prints mirrored left-right, as inked or live-scan contact prints are of a "
+                             "photo of the pad (the true rolled prints keep a photo's handedness)")
+    parser.add_argument("--mirror", choices=MIRROR_CHOICES, default="auto",
+                        help="how the probes are turned for the gallery (fs3d eval match: auto, --mirror, --no-mirror)")
     args = parser.parse_args()
     info = machine()
     with tempfile.TemporaryDirectory() as scratch:
@@ -59,10 +66,16 @@ def main() -> int:
                 shutil.copy(capture_folder / "rolled_print.png", gallery / f"{finger}.png")
                 write_reconstruction(fuse(load_any(files)[0], FuseConfig(splat=None)), rec)
             reconstructions.append(rec)
+        if args.inked:  # a copy of the gallery the other way round
+            inked = work / "contact-gallery-inked"
+            inked.mkdir(exist_ok=True)
+            for path in sorted(gallery.glob("*.png")):
+                write_image(inked / path.name, read_image(path)[:, ::-1])
+            gallery = inked
         samples, _ = parse_samples(sorted(probes.glob("*.png")), views={"0"})
         out = Path(scratch) / "match"
         summary = run_match_evaluation(samples, out, rolled=reconstructions, gallery=read_gallery([gallery]),
-                                       flat=args.flat)
+                                       flat=args.flat, mirror=args.mirror)
         scores = list(csv.DictReader((out / "scores.csv").open()))
         spread = []
         for protocol in ("photos vs gallery", "rolled prints vs gallery"):
@@ -72,7 +85,8 @@ def main() -> int:
                 spread.append(f"| {protocol} | {np.median(genuine):.0f} ({min(genuine)}) | {np.median(impostor):.0f} "
                               f"({max(impostor)}) |")
     print(f"Machine: {info['cpu']}, {info['cores']} cores; {len(args.seeds)} synthetic fingers, uwa rig 1280x1024; "
-          f"photos' prints {'flat' if args.flat else 'unrolled'}.\n")
+          f"photos' prints {'flat' if args.flat else 'unrolled'}; "
+          f"gallery {'mirrored (inked)' if args.inked else 'as made'}, probes turned: {args.mirror}.\n")
     print(summary_markdown(summary))
     print("| protocol | genuine median (lowest) | impostor median (highest) |\n|---|---|---|")
     print("\n".join(spread))

@@ -44,9 +44,15 @@ def add(actions) -> None:
     match.add_argument("--gallery-naming", default=GALLERY_NAMING,
                        help="regular expression on the gallery's file stems with the named group 'finger', matching the "
                             "probes' finger (default: the whole stem, e.g. 1_1.png for UWA's 1_1_*)")
-    match.add_argument("--mirror", action="store_true",
-                       help="mirror the probes left-right before comparing them with the gallery (an inked or scanned "
-                            "print is the mirror image of a photo of the pad)")
+    handedness = match.add_mutually_exclusive_group()
+    handedness.add_argument("--mirror", dest="mirror", action="store_const", const="yes", default="auto",
+                            help="mirror the probes left-right before comparing them with the gallery (an inked, "
+                                 "scanned or live-scan contact print is the mirror image of a photo of the pad). "
+                                 "Default: each kind of probe compared both ways, the way whose probes find the "
+                                 "stronger best matches kept and said in summary.md")
+    handedness.add_argument("--no-mirror", dest="mirror", action="store_const", const="no",
+                            help="compare the probes with the gallery as they are (a rolled print made from a model "
+                                 "or a texture, as fs3d synth's, has a photo's handedness)")
     match.add_argument("--naming", default=UWA_NAMING,
                        help="regular expression on file stems with named groups 'capture' and 'finger' (or "
                             "'subject' and 'hand'), optional 'view' and 'session'; default: the UWA 3D/2D naming "
@@ -71,7 +77,7 @@ def add(actions) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments.match import parse_samples, read_gallery, run_match_evaluation
+    from ..experiments.match import handedness_sentence, parse_samples, read_gallery, run_match_evaluation
     from ..io.images import find_files
 
     nbis_needed("fs3d eval match")
@@ -95,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")
+    for protocol, way in summary["handedness"].items():
+        print(handedness_sentence(protocol, way))
     print(f"wrote {args.output}")
     if not summary["protocols"]:
         print("fs3d eval match: no two prints could be compared (see summary.md)", file=sys.stderr)

@@ -21,8 +21,10 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
 * **gallery** (with ``gallery`` contact prints, used as they are, each named by its finger with
   ``gallery_naming``): every probe print — photos, renders, rolled prints — against every gallery
   print, genuine for the same finger; one protocol per probe kind (``photos vs gallery``, ...).
-  ``mirror``: the probes are mirrored left-right first (an inked or scanned contact print is the
-  mirror image of a photo of the pad; a rolled print of ``fs3d synth`` or IMPOSE is not).
+  ``mirror``: ``yes``, the probes are mirrored left-right first (an inked or scanned contact print is the
+  mirror image of a photo of the pad; a rolled print of ``fs3d synth`` or IMPOSE is not); ``no``, as they are;
+  ``auto`` (the default), each kind of probe compared both ways and the gallery's way round read from the scores
+  (:mod:`fingersplat3d.eval.handedness`: the way whose probes find the stronger best matches), said in the summary.
 
 Every photo and render becomes a contact-like print (:mod:`fingersplat3d.eval.contact`); compared with flat-laid prints
 (the gallery's, the rolled prints), a photo's finger is unrolled first through the surface its silhouette gives
@@ -41,15 +43,20 @@ import cv2
 import numpy as np
 
 from ..errors import FS3DError, InputError
+from ..eval.handedness import gallery_handedness, median_best
 from .tables import write_rows
 
-__all__ = ["UWA_NAMING", "GALLERY_NAMING", "Sample", "read_gallery", "parse_samples", "real_pairs", "run_match_evaluation", "DEFAULT_ANGLES"]
+__all__ = ["UWA_NAMING", "GALLERY_NAMING", "MIRROR_CHOICES", "Sample", "read_gallery", "parse_samples", "real_pairs",
+           "run_match_evaluation", "DEFAULT_ANGLES"]
 
 UWA_NAMING = r"^(?P<subject>\d+)_(?P<hand>\d+)_(?P<capture>\d+)_(?P<session>\d+)_(?P<view>\d+)$"
 """UWA 3D/2D: finger = subject + finger number, capture = capture + session, view = frame."""
 DEFAULT_ANGLES = (-30.0, -15.0, 0.0, 15.0, 30.0)
 GALLERY_NAMING = r"^(?P<finger>.+)$"
 """A contact print's file stem is its finger, as the probes' naming reads it (e.g. ``1_1.png`` for UWA's ``1_1_*``)."""
+MIRROR_CHOICES = ("auto", "yes", "no")
+"""How the probes are turned for the gallery: read from the scores (:mod:`~fingersplat3d.eval.handedness`), mirrored
+left-right, or as they are."""
 PROBE_KINDS = {"real": "photos", "synthesized": "renders", "rolled": "rolled prints"}
 
 
@@ -263,10 +270,30 @@ def _mirrored(probe: _Print, extractor: str = "mindtct"):
     return analyse(ContactImage.of_print(probe.image[:, ::-1].copy()), nfiq2=False, extractor=extractor)
 
 
+def _gallery_scores(probes: list[_Print], contact: list, mirrored: bool, extractor: str) -> np.ndarray:
+    """``[probes, gallery]`` bozorth3 scores of the probes (mirrored left-right first, or as they are) against the
+    gallery's prints; NaN where either has no minutiae to compare."""
+    from ..eval.fingerprint import match_score
+
+    scores = np.full((len(probes), len(contact)), np.nan)
+    for i, probe in enumerate(probes):
+        template = _mirrored(probe, extractor) if mirrored else probe.fingerprint
+        if template is None:
+            continue
+        for j, (_, entry) in enumerate(contact):
+            if entry.fingerprint is not None:
+                scores[i, j] = match_score(template, entry.fingerprint)
+    return scores
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not np.isfinite(value) else float(value)
+
+
 def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: list[Path] = (),
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
                          progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
-                         mirror: bool = False, enhancer: str = "gabor", flat: bool = False,
+                         mirror: str = "auto", enhancer: str = "gabor", flat: bool = False,
                          extractor: str = "mindtct") -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary (``enhancer``: of the
     rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`; ``extractor``: every print's minutiae,
@@ -279,6 +306,8 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     from ..eval.fingerprint import match_score
     from ..io.images import read_image
 
+    if mirror not in MIRROR_CHOICES:
+        raise ValueError(f"mirror must be one of {MIRROR_CHOICES}, got {mirror!r}")
     pattern = compile_naming(naming)
     prints = out / "prints"
     prints.mkdir(parents=True, exist_ok=True)
@@ -331,15 +360,24 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     probes = ([("real", sample.finger, p) for sample, p in zip(samples, laid)]
               + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
               + [("rolled", finger, p) for finger, _, _, p in unrolled])
-    for kind, finger, probe in probes if contact else ():
-        template = _mirrored(probe, extractor) if mirror and probe.fingerprint is not None else probe.fingerprint
-        if template is None:
+    handedness = {}
+    for kind in PROBE_KINDS:
+        kind_probes = [(finger, probe) for k, finger, probe in probes if k == kind and probe.fingerprint is not None]
+        if not contact or not kind_probes:
             continue
-        for gallery_finger, entry in contact:
-            if entry.fingerprint is not None:
-                rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name, "gallery": entry.name,
-                             "genuine": int(gallery_finger == finger), "angle_deg": "",
-                             "score": match_score(template, entry.fingerprint)})
+        ways = (False, True) if mirror == "auto" else (mirror == "yes",)
+        scores = {way: _gallery_scores([p for _, p in kind_probes], contact, way, extractor) for way in ways}
+        best = {way: median_best(table) for way, table in scores.items()}
+        flip = gallery_handedness(scores[False], scores[True]).mirrored if mirror == "auto" else mirror == "yes"
+        handedness[f"{PROBE_KINDS[kind]} vs gallery"] = {
+            "mirrored": flip, "chosen": "read from the scores" if mirror == "auto" else "given",
+            "median_best_as_is": _finite(best.get(False)), "median_best_mirrored": _finite(best.get(True))}
+        for (finger, probe), row in zip(kind_probes, scores[flip]):
+            for (gallery_finger, entry), score in zip(contact, row):
+                if np.isfinite(score):
+                    rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name,
+                                 "gallery": entry.name, "genuine": int(gallery_finger == finger), "angle_deg": "",
+                                 "score": int(score), "mirrored": int(flip)})
     all_prints = (real + [p for p, q in zip(laid, real) if p is not q] + [p for *_, renders in synthesized for _, p in renders]
                   + [p for *_, p in unrolled]
                   + [p for _, p in contact])
@@ -347,8 +385,9 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
                  "failure": p.failure} for p in all_prints])
-    write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score"), rows)
-    summary = summarise(rows, all_prints) | {"minutiae": extractor}
+    write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score", "mirrored"),
+               [{"mirrored": ""} | row for row in rows])
+    summary = summarise(rows, all_prints) | {"minutiae": extractor, "handedness": handedness}
     (out / "summary.md").write_text(summary_markdown(summary))
     curves = {}
     from ..eval.verification import det_curve
@@ -403,6 +442,18 @@ def _percent(value) -> str:
     return "—" if value is None else f"{100 * value:.1f} %"
 
 
+def handedness_sentence(protocol: str, way: dict) -> str:
+    """One sentence on which way round the probes of ``protocol`` were compared with the gallery, and why."""
+    turned = "mirrored left-right" if way["mirrored"] else "as they are"
+    figures = [f"{label} {way[key]:.0f}" for label, key in (("as they are", "median_best_as_is"),
+                                                           ("mirrored", "median_best_mirrored"))
+               if way.get(key) is not None]
+    why = ("the gallery's way round read from the scores" if way["chosen"] == "read from the scores"
+           else "as --mirror or --no-mirror fixes it")
+    return (f"{protocol}: the probes compared {turned} ({why}; their best matches' median score "
+            f"{', '.join(figures)}).")
+
+
 def summary_markdown(summary: dict) -> str:
     lines = [f"# Matching ({summary.get('minutiae', 'mindtct')} + bozorth3)", "",
              f"{summary['prints']} prints; {len(summary['failed'])} could not be made, NFIQ2 failed on "
@@ -416,6 +467,8 @@ def summary_markdown(summary: dict) -> str:
                          f"{_percent(r.get('fnmr_at_fmr_1pct'))} | {_percent(r.get('fnmr_at_fmr_0.01pct'))} | "
                          f"{_percent(r.get('fmr_zero'))} | {_percent(r.get('fmr_resolution'))} |")
         lines += ["", "FNMR at an FMR below the floor cannot be told from FMR_zero with this many impostor scores."]
+    for protocol, way in summary.get("handedness", {}).items():
+        lines += ["", handedness_sentence(protocol, way)]
     if summary["angles"]:
         lines += ["", "Synthesized views against real photos of the finger's other captures, by the render's angle "
                   "from the gallery camera:", "",
