@@ -192,6 +192,21 @@ def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
     as_is = _gallery_rows(tmp_path / "as_is")
     assert all(r["mirrored"] == "0" for r in as_is)
     assert max(int(r["score"]) for r in as_is if r["genuine"] == "1") < min(found_genuine)
+    # Fingers whose ridges lie closer than the photos' 9 px (or a gallery scanned coarser): each gallery print is
+    # compared at scales about the photos' ridge period, each pair at its best
+    coarse = tmp_path / "coarse"
+    coarse.mkdir()
+    for path in gallery.iterdir():
+        cv2.imwrite(str(coarse / path.name), cv2.resize(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), None, fx=0.8,
+                                                        fy=0.8, interpolation=cv2.INTER_AREA))
+    for flag, folder in (([], "scaled"), (["--gallery-as-is"], "own_scale")):
+        assert main(["eval", "match", str(probes), "--gallery", str(coarse), *flag, "-o", str(tmp_path / folder)]) == 0
+    scaled, own = _gallery_rows(tmp_path / "scaled"), _gallery_rows(tmp_path / "own_scale")
+    assert all(1.0 < float(r["gallery_scale"]) < 1.6 for r in scaled) and {r["gallery_scale"] for r in own} == {"1.0"}
+    for probe in {r["probe"] for r in scaled}:
+        best, plain = ([int(r["score"]) for r in rows if r["genuine"] == "1" and r["probe"] == probe][0]
+                       for rows in (scaled, own))
+        assert best > plain
     assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--gallery-naming", "(?P<who>.+)",
                  "-o", str(tmp_path / "o2")]) == 2
 

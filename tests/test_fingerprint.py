@@ -136,3 +136,51 @@ def test_error_rates_at_the_extremes():
         error_rates([np.nan], [1])
     with pytest.raises(ValueError, match="target"):
         fnmr_at_fmr([1], [0], 1.5)
+
+
+@pytest.mark.parametrize("period", [7.0, 9.0, 12.0])
+def test_a_print_is_brought_to_the_photos_ridge_period(period):
+    """A print whose ridges lie ``period`` px apart (a finger's own spacing at 500 ppi, or another scanner's
+    resolution), dark ridges on white: scaled so they lie TARGET_PERIOD_PX apart, as a photo's print is."""
+    from fingersplat3d.eval.contact import print_at_period
+
+    yy, xx = np.mgrid[0:400, 0:360]
+    ridges = np.cos(2 * np.pi * (0.8 * xx + 0.6 * yy) / period)  # ridges across the print at an angle
+    inked = (yy - 200) ** 2 / 170 ** 2 + (xx - 180) ** 2 / 140 ** 2 < 1
+    image = np.where(inked, np.rint(128 + 48 * ridges), 255).astype(np.uint8)
+    scaled = print_at_period(image)
+    assert scaled.period_px == pytest.approx(period, rel=0.03)
+    if period == TARGET_PERIOD_PX:  # already there: the print itself, the identity map
+        assert scaled.image is image and scaled.ppi_scale == 1.0
+        return
+    assert scaled.ppi_scale == pytest.approx(TARGET_PERIOD_PX / period, rel=0.03)
+    assert print_at_period(scaled.image).period_px == pytest.approx(TARGET_PERIOD_PX, rel=0.03)
+    assert scaled.image.dtype == np.uint8 and scaled.image[0, 0] == 255  # still white outside the ink
+    corner = scaled.to_print(np.array([[360.0, 400.0]]))[0]
+    assert corner == pytest.approx([scaled.image.shape[1], scaled.image.shape[0]], abs=1.0)
+
+
+def test_a_print_without_ridges_or_not_8_bit_gray():
+    from fingersplat3d.eval.contact import print_at_period
+
+    blank = np.full((300, 300), 255, np.uint8)
+    assert print_at_period(blank).image is blank  # no period to read: as it is
+    with pytest.raises(ValueError, match="8-bit gray"):
+        print_at_period(blank.astype(np.float32))
+
+
+def test_a_gallery_print_is_analysed_at_scales_about_the_photos_ridge_period():
+    from fingersplat3d.eval.contact import SCALE_STEPS, print_at_period, prints_about_period
+
+    yy, xx = np.mgrid[0:400, 0:360]
+    image = np.where((yy - 200) ** 2 / 170 ** 2 + (xx - 180) ** 2 / 140 ** 2 < 1,
+                     np.rint(128 + 48 * np.cos(2 * np.pi * (0.6 * xx + 0.8 * yy) / 11.0)), 255).astype(np.uint8)
+    scaled = prints_about_period(image)
+    assert len(scaled) == len(SCALE_STEPS) and 1.0 in SCALE_STEPS
+    middle = scaled[SCALE_STEPS.index(1.0)]
+    assert middle.ppi_scale == pytest.approx(print_at_period(image).ppi_scale)
+    for step, contact in zip(SCALE_STEPS, scaled):  # each at its step of the period: 9 px times the step
+        assert contact.ppi_scale == pytest.approx(step * middle.ppi_scale)
+        assert print_at_period(contact.image).period_px == pytest.approx(TARGET_PERIOD_PX * step, rel=0.04)
+    blank = np.full((200, 200), 255, np.uint8)
+    assert [c.image is blank for c in prints_about_period(blank)] == [True]  # no period read: as it is, once

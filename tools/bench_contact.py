@@ -1,6 +1,7 @@
 """Contactless against contact on synthetic fingers: photos and rolled-equivalent prints against true rolled prints.
 
-    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR] [--flat] [--inked] [--mirror auto|yes|no]
+    python3 tools/bench_contact.py [--seeds 0 1 ... 9] [--work DIR] [--flat] [--inked] [--zoom F] [--gallery-as-is]
+                                   [--mirror auto|yes|no]
 
 Per seed: an ``fs3d synth`` finger on the uwa rig (1280x1024), its three photos renamed in the UWA naming
 (finger ``<seed>_1``, frame 0 the front camera), a geometry-only fuse of the photos alone (no cameras, no
@@ -32,6 +33,7 @@ def main() -> int:
                                                  summary_markdown)
     from fingersplat3d.io.capture import write_capture
     from fingersplat3d.io.images import read_image, write_image
+    from fingersplat3d.sampling import resized_image
     from fingersplat3d.io.datasets import load_any
     from fingersplat3d.pipeline import FuseConfig, fuse, write_reconstruction
     from fingersplat3d.synth import SynthConfig, synthesize
@@ -43,6 +45,11 @@ def main() -> int:
     parser.add_argument("--inked", action="store_true",
                         help="the gallery's prints mirrored left-right, as inked or live-scan contact prints are of a "
                              "photo of the pad (the true rolled prints keep a photo's handedness)")
+    parser.add_argument("--zoom", type=float, default=1.0,
+                        help="the gallery's prints resized by this factor: fingers whose ridges are finer or coarser "
+                             "than the probes' 9 px a ridge, or prints scanned at another resolution")
+    parser.add_argument("--gallery-as-is", action="store_true",
+                        help="the gallery compared at its own scale (fs3d eval match --gallery-as-is)")
     parser.add_argument("--mirror", choices=MIRROR_CHOICES, default="auto",
                         help="how the probes are turned for the gallery (fs3d eval match: auto, --mirror, --no-mirror)")
     args = parser.parse_args()
@@ -66,16 +73,19 @@ def main() -> int:
                 shutil.copy(capture_folder / "rolled_print.png", gallery / f"{finger}.png")
                 write_reconstruction(fuse(load_any(files)[0], FuseConfig(splat=None)), rec)
             reconstructions.append(rec)
-        if args.inked:  # a copy of the gallery the other way round
-            inked = work / "contact-gallery-inked"
-            inked.mkdir(exist_ok=True)
+        if args.inked or args.zoom != 1.0:  # a copy of the gallery the other way round, or resized
+            changed = work / f"contact-gallery-{'inked' if args.inked else 'as-made'}-{args.zoom:g}"
+            changed.mkdir(exist_ok=True)
             for path in sorted(gallery.glob("*.png")):
-                write_image(inked / path.name, read_image(path)[:, ::-1])
-            gallery = inked
+                image = read_image(path)[:, ::-1] if args.inked else read_image(path)
+                write_image(changed / path.name, resized_image(image, (round(image.shape[1] * args.zoom),
+                                                                        round(image.shape[0] * args.zoom))))
+            gallery = changed
         samples, _ = parse_samples(sorted(probes.glob("*.png")), views={"0"})
         out = Path(scratch) / "match"
         summary = run_match_evaluation(samples, out, rolled=reconstructions, gallery=read_gallery([gallery]),
-                                       flat=args.flat, mirror=args.mirror)
+                                       flat=args.flat, mirror=args.mirror,
+                                       gallery_about_period=not args.gallery_as_is)
         scores = list(csv.DictReader((out / "scores.csv").open()))
         spread = []
         for protocol in ("photos vs gallery", "rolled prints vs gallery"):
@@ -86,7 +96,9 @@ def main() -> int:
                               f"({max(impostor)}) |")
     print(f"Machine: {info['cpu']}, {info['cores']} cores; {len(args.seeds)} synthetic fingers, uwa rig 1280x1024; "
           f"photos' prints {'flat' if args.flat else 'unrolled'}; "
-          f"gallery {'mirrored (inked)' if args.inked else 'as made'}, probes turned: {args.mirror}.\n")
+          f"gallery {'mirrored (inked)' if args.inked else 'as made'}, zoom {args.zoom:g}, "
+          f"{'at its own scale' if args.gallery_as_is else 'at scales about the probes ridge period'}, "
+          f"probes turned: {args.mirror}.\n")
     print(summary_markdown(summary))
     print("| protocol | genuine median (lowest) | impostor median (highest) |\n|---|---|---|")
     print("\n".join(spread))

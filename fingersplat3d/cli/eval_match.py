@@ -39,11 +39,15 @@ def add(actions) -> None:
                        help="reconstruction folders from 'fs3d fuse' whose rolled-equivalent prints (fs3d print) are "
                             "compared with each other and with the photos of the other captures")
     match.add_argument("--gallery", nargs="+", type=Path, default=[], metavar="PRINT",
-                       help="contact prints (files or folders; 8-bit gray, ridges dark, ~500 ppi, used as they are) that "
-                            "every photo, render and rolled print is compared with: contactless against contact")
+                       help="contact prints (files or folders; 8-bit gray, ridges dark) that every photo, render and "
+                            "rolled print is compared with: contactless against contact")
     match.add_argument("--gallery-naming", default=GALLERY_NAMING,
                        help="regular expression on the gallery's file stems with the named group 'finger', matching the "
                             "probes' finger (default: the whole stem, e.g. 1_1.png for UWA's 1_1_*)")
+    match.add_argument("--gallery-as-is", action="store_true",
+                       help="compare the gallery's prints at their own scale only; by default each is compared at five "
+                            "scales about the probes' ridge period (9 px), each pair at its best, since photos carry "
+                            "no scale")
     handedness = match.add_mutually_exclusive_group()
     handedness.add_argument("--mirror", dest="mirror", action="store_const", const="yes", default="auto",
                             help="mirror the probes left-right before comparing them with the gallery (an inked, "
@@ -97,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
         summary = run_match_evaluation(samples, folder, reconstructions=args.reconstructions, angles=args.angles,
                                        naming=args.naming, ridges=args.ridges, rolled=args.rolled,
                                        gallery=gallery, mirror=args.mirror, enhancer=args.enhance,
-                                       flat=args.flat, extractor=args.minutiae)
+                                       flat=args.flat, extractor=args.minutiae,
+                                       gallery_about_period=not args.gallery_as_is)
     for protocol, rates in summary["protocols"].items():
         eer = "no EER (genuine or impostor pairs missing)" if rates.get("eer") is None else f"EER {rates['eer']:.1%}"
         print(f"{protocol}: {rates['genuine']} genuine, {rates['impostor']} impostor comparisons; {eer}")

@@ -18,9 +18,13 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
   models (genuine for the same finger), and, as **rolled vs photos**, against the real photos of the
   gallery view of every other capture.
 
-* **gallery** (with ``gallery`` contact prints, used as they are, each named by its finger with
-  ``gallery_naming``): every probe print — photos, renders, rolled prints — against every gallery
-  print, genuine for the same finger; one protocol per probe kind (``photos vs gallery``, ...).
+* **gallery** (with ``gallery`` contact prints, each named by its finger with ``gallery_naming``): every probe
+  print — photos, renders, rolled prints — against every gallery print, genuine for the same finger; one protocol
+  per probe kind (``photos vs gallery``, ...). A photo carries no scale, so its print is scaled to a ridge period
+  of 9 px; each gallery print is compared at five scales about the same period, each pair at its best
+  (``gallery_about_period``; a finger's ridges 0.40-0.55 mm apart are 8-11 px at 500 ppi, bozorth3 tolerates a scale
+  little off, and two kinds of print of one finger need not read the same period), and rolled prints of models in mm
+  are brought to that period.
   ``mirror``: ``yes``, the probes are mirrored left-right first (an inked or scanned contact print is the
   mirror image of a photo of the pad; a rolled print of ``fs3d synth`` or IMPOSE is not); ``no``, as they are;
   ``auto`` (the default), each kind of probe compared both ways and the gallery's way round read from the scores
@@ -244,20 +248,54 @@ def read_gallery(paths: list[Path], naming: str = GALLERY_NAMING) -> list[tuple[
     return gallery
 
 
-def _gallery_print(finger: str, path: Path, extractor: str = "mindtct"):
-    """A contact print as it is (8-bit gray, ridges dark, ~500 ppi): ``(finger, _Print)``."""
-    from ..eval.contact import ContactImage
+@dataclass(frozen=True)
+class _GalleryPrint:
+    """A contact print of the gallery, analysed at each scale it is compared at (one: as it is)."""
+
+    name: str
+    fingerprints: tuple  # Fingerprint at each scale that has minutiae
+    scales: tuple[float, ...]  # the factor each was resized by
+    failure: str
+
+    @property
+    def fingerprint(self):
+        """The print at the probes' own ridge period (the middle scale), for prints.csv; None without minutiae."""
+        return self.fingerprints[len(self.fingerprints) // 2] if self.fingerprints else None
+
+
+def _gallery_print(finger: str, path: Path, extractor: str = "mindtct", about_period: bool = True):
+    """A contact print (8-bit gray, ridges dark) analysed at scales about the probes' ridge period
+    (:func:`~fingersplat3d.eval.contact.prints_about_period`), or as it is: ``(finger, _GalleryPrint)``."""
+    from ..eval.contact import ContactImage, prints_about_period
     from ..eval.fingerprint import analyse
     from ..io.images import read_image
 
+    name = f"gallery/{path.stem}"
     try:
         gray = read_image(path, gray=True)
     except FS3DError as error:
-        return finger, _Print(f"gallery/{path.stem}", None, str(error))
+        return finger, _GalleryPrint(name, (), (), str(error))
     image = np.rint(np.clip(gray, 0, 1) * 255).astype(np.uint8)
-    fingerprint = analyse(ContactImage.of_print(image), nfiq2=False, extractor=extractor)
-    return finger, _Print(f"gallery/{path.stem}", fingerprint if fingerprint.count else None, fingerprint.failure or
-                          ("" if fingerprint.count else f"{extractor} found no minutiae"))
+    contacts = prints_about_period(image) if about_period else [ContactImage.of_print(image)]
+    analysed = [(analyse(c, nfiq2=False, extractor=extractor), c.ppi_scale) for c in contacts]
+    usable = [(f, scale) for f, scale in analysed if f.count]
+    failure = "" if usable else (analysed[0][0].failure or f"{extractor} found no minutiae")
+    return finger, _GalleryPrint(name, tuple(f for f, _ in usable), tuple(scale for _, scale in usable), failure)
+
+
+def _at_period(probe: _Print, extractor: str = "mindtct") -> _Print:
+    """A rolled print brought to the photos' ridge period for the gallery (a model's print in mm keeps its finger's
+    own spacing); the print itself where it already is, or has no print."""
+    from ..eval.contact import print_at_period
+    from ..eval.fingerprint import analyse
+
+    if probe.fingerprint is None or probe.image is None:
+        return probe
+    scaled = print_at_period(probe.image)
+    if scaled.ppi_scale == 1.0:
+        return probe
+    fingerprint = analyse(scaled, nfiq2=False, extractor=extractor)
+    return _Print(probe.name, fingerprint if fingerprint.count else None, fingerprint.failure, scaled.image)
 
 
 def _mirrored(probe: _Print, extractor: str = "mindtct"):
@@ -270,20 +308,24 @@ def _mirrored(probe: _Print, extractor: str = "mindtct"):
     return analyse(ContactImage.of_print(probe.image[:, ::-1].copy()), nfiq2=False, extractor=extractor)
 
 
-def _gallery_scores(probes: list[_Print], contact: list, mirrored: bool, extractor: str) -> np.ndarray:
+def _gallery_scores(probes: list[_Print], contact: list, mirrored: bool,
+                    extractor: str) -> tuple[np.ndarray, np.ndarray]:
     """``[probes, gallery]`` bozorth3 scores of the probes (mirrored left-right first, or as they are) against the
-    gallery's prints; NaN where either has no minutiae to compare."""
+    gallery's prints, each pair's best over the scales a gallery print was analysed at, and that scale; NaN where
+    either has no minutiae to compare."""
     from ..eval.fingerprint import match_score
 
-    scores = np.full((len(probes), len(contact)), np.nan)
+    scores, scales = np.full((len(probes), len(contact)), np.nan), np.full((len(probes), len(contact)), np.nan)
     for i, probe in enumerate(probes):
         template = _mirrored(probe, extractor) if mirrored else probe.fingerprint
         if template is None:
             continue
         for j, (_, entry) in enumerate(contact):
-            if entry.fingerprint is not None:
-                scores[i, j] = match_score(template, entry.fingerprint)
-    return scores
+            if entry.fingerprints:
+                each = [match_score(template, f) for f in entry.fingerprints]
+                best = int(np.argmax(each))
+                scores[i, j], scales[i, j] = each[best], entry.scales[best]
+    return scores, scales
 
 
 def _finite(value: float | None) -> float | None:
@@ -294,13 +336,15 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                          angles: tuple[float, ...] = DEFAULT_ANGLES, naming: str = UWA_NAMING, ridges: str = "bright",
                          progress: bool = True, rolled: list[Path] = (), gallery: list[tuple[str, Path]] = (),
                          mirror: str = "auto", enhancer: str = "gabor", flat: bool = False,
-                         extractor: str = "mindtct") -> dict:
+                         extractor: str = "mindtct", gallery_about_period: bool = True) -> dict:
     """Both protocols; writes the files named in the module docstring and returns the summary (``enhancer``: of the
     rolled prints, :func:`~fingersplat3d.prints.rolled.rolled_print`; ``extractor``: every print's minutiae,
     :data:`~fingersplat3d.eval.fingerprint.MINUTIAE_EXTRACTORS`). Photos compared with photos or renders (one
     camera's foreshortening on both sides) are scaled and turned; compared with flat-laid prints (the gallery's contact
     prints, the rolled prints), they are unrolled first (:func:`~fingersplat3d.prints.make.unrolled_photo`), unless
-    ``flat``."""
+    ``flat``. ``gallery_about_period``: each gallery print compared at five scales about the photos' ridge period, each
+    pair at its best (:func:`~fingersplat3d.eval.contact.prints_about_period`), and rolled prints in mm brought to that
+    period, as photos carry no scale; else every print as it is."""
     from tqdm import tqdm
 
     from ..eval.fingerprint import match_score
@@ -355,29 +399,31 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                 rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
                              "genuine": int(sample.finger == finger_a), "angle_deg": "",
                              "score": match_score(print_a.fingerprint, laid[k].fingerprint)})
-    contact = [_gallery_print(finger, path, extractor) for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print",
-                                                                      disable=not progress)]
+    contact = [_gallery_print(finger, path, extractor, gallery_about_period)
+               for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print", disable=not progress)]
     probes = ([("real", sample.finger, p) for sample, p in zip(samples, laid)]
               + [("synthesized", finger, p) for finger, _, _, renders in synthesized for _, p in renders]
-              + [("rolled", finger, p) for finger, _, _, p in unrolled])
+              + [("rolled", finger, _at_period(p, extractor) if contact and gallery_about_period else p)
+                 for finger, _, _, p in unrolled])
     handedness = {}
     for kind in PROBE_KINDS:
         kind_probes = [(finger, probe) for k, finger, probe in probes if k == kind and probe.fingerprint is not None]
         if not contact or not kind_probes:
             continue
         ways = (False, True) if mirror == "auto" else (mirror == "yes",)
-        scores = {way: _gallery_scores([p for _, p in kind_probes], contact, way, extractor) for way in ways}
+        compared = {way: _gallery_scores([p for _, p in kind_probes], contact, way, extractor) for way in ways}
+        scores = {way: table for way, (table, _) in compared.items()}
         best = {way: median_best(table) for way, table in scores.items()}
         flip = gallery_handedness(scores[False], scores[True]).mirrored if mirror == "auto" else mirror == "yes"
         handedness[f"{PROBE_KINDS[kind]} vs gallery"] = {
             "mirrored": flip, "chosen": "read from the scores" if mirror == "auto" else "given",
             "median_best_as_is": _finite(best.get(False)), "median_best_mirrored": _finite(best.get(True))}
-        for (finger, probe), row in zip(kind_probes, scores[flip]):
-            for (gallery_finger, entry), score in zip(contact, row):
+        for (finger, probe), row, row_scales in zip(kind_probes, *compared[flip]):
+            for (gallery_finger, entry), score, scale in zip(contact, row, row_scales):
                 if np.isfinite(score):
                     rows.append({"protocol": f"{PROBE_KINDS[kind]} vs gallery", "probe": probe.name,
                                  "gallery": entry.name, "genuine": int(gallery_finger == finger), "angle_deg": "",
-                                 "score": int(score), "mirrored": int(flip)})
+                                 "score": int(score), "mirrored": int(flip), "gallery_scale": round(float(scale), 3)})
     all_prints = (real + [p for p, q in zip(laid, real) if p is not q] + [p for *_, renders in synthesized for _, p in renders]
                   + [p for *_, p in unrolled]
                   + [p for _, p in contact])
@@ -385,8 +431,8 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
                [{"name": p.name, "minutiae": p.fingerprint.count if p.fingerprint else "",
                  "nfiq2": "" if p.fingerprint is None or p.fingerprint.nfiq2 is None else p.fingerprint.nfiq2,
                  "failure": p.failure} for p in all_prints])
-    write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score", "mirrored"),
-               [{"mirrored": ""} | row for row in rows])
+    write_rows(out / "scores.csv", ("protocol", "probe", "gallery", "genuine", "angle_deg", "score", "mirrored",
+                                    "gallery_scale"), [{"mirrored": "", "gallery_scale": ""} | row for row in rows])
     summary = summarise(rows, all_prints) | {"minutiae": extractor, "handedness": handedness}
     (out / "summary.md").write_text(summary_markdown(summary))
     curves = {}
