@@ -230,3 +230,25 @@ def test_a_galleries_handedness_is_read_from_the_best_scores_alone():
     assert not gallery_handedness(np.full((2, 3), nan), np.full((2, 3), nan)).mirrored
     with pytest.raises(ValueError, match="probes, gallery"):
         median_best(np.zeros(3))
+
+
+def test_a_rolled_print_is_compared_with_photos_at_scales_about_their_ridge_period():
+    """The rolled print of a model against photos (protocol 'rolled vs photos'): five scales about the photos' ridge
+    period, each with its minutiae; the print itself where no period is read."""
+    from pathlib import Path
+
+    from fingersplat3d.eval.contact import SCALE_STEPS, ContactImage
+    from fingersplat3d.eval.fingerprint import analyse, match_score
+    from fingersplat3d.experiments.match import _about_period, _Print
+
+    image = cv2.imread(str(Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed1" / "rolled_print.png"),
+                       cv2.IMREAD_GRAYSCALE)
+    fingerprint = analyse(ContactImage.of_print(image), nfiq2=False)
+    about = _about_period(_Print("rolled", fingerprint, "", image), "mindtct")
+    assert len(about) == len(SCALE_STEPS) and all(f.count > 20 for f in about)
+    # the print reads 7.9 px a ridge: brought to 9 px it is 1.14 times as large, so the smallest step (0.87) lies
+    # nearest its own scale and matches it best, the largest worst
+    scores = [match_score(f, fingerprint) for f in about]
+    assert scores[0] == max(scores) and scores[-1] == min(scores)
+    blank = np.full((300, 300), 255, np.uint8)
+    assert _about_period(_Print("blank", fingerprint, "", blank), "mindtct") == (fingerprint,)

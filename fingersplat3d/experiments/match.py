@@ -16,7 +16,8 @@ subject_finger, capture = capture_session, view = frame). Two protocols:
 * **rolled** (with ``rolled`` reconstruction folders; no Gaussians needed): the rolled-equivalent
   print of each model (:mod:`fingersplat3d.prints`) against the rolled prints of the other captures'
   models (genuine for the same finger), and, as **rolled vs photos**, against the real photos of the
-  gallery view of every other capture.
+  gallery view of every other capture (the rolled print at five scales about the photos' ridge period, each pair at
+  its best, as the gallery below: two kinds of print need not read the same period).
 
 * **gallery** (with ``gallery`` contact prints, each named by its finger with ``gallery_naming``): every probe
   print — photos, renders, rolled prints — against every gallery print, genuine for the same finger; one protocol
@@ -328,6 +329,18 @@ def _gallery_scores(probes: list[_Print], contact: list, mirrored: bool,
     return scores, scales
 
 
+def _about_period(probe: _Print, extractor: str = "mindtct") -> tuple:
+    """A rolled print's fingerprints at the scales about the photos' ridge period
+    (:func:`~fingersplat3d.eval.contact.prints_about_period`), those with minutiae: a print pressed flat and a photo
+    unrolled through a guessed section need not read the same period (the real dev captures' rolled prints against
+    their photos: 45.9 % EER at one scale, 35.9 % at the best of five)."""
+    from ..eval.contact import prints_about_period
+    from ..eval.fingerprint import analyse
+
+    analysed = [analyse(c, nfiq2=False, extractor=extractor) for c in prints_about_period(probe.image)]
+    return tuple(f for f in analysed if f.count) or (probe.fingerprint,)
+
+
 def _finite(value: float | None) -> float | None:
     return None if value is None or not np.isfinite(value) else float(value)
 
@@ -342,9 +355,10 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     :data:`~fingersplat3d.eval.fingerprint.MINUTIAE_EXTRACTORS`). Photos compared with photos or renders (one
     camera's foreshortening on both sides) are scaled and turned; compared with flat-laid prints (the gallery's contact
     prints, the rolled prints), they are unrolled first (:func:`~fingersplat3d.prints.make.unrolled_photo`), unless
-    ``flat``. ``gallery_about_period``: each gallery print compared at five scales about the photos' ridge period, each
-    pair at its best (:func:`~fingersplat3d.eval.contact.prints_about_period`), and rolled prints in mm brought to that
-    period, as photos carry no scale; else every print as it is."""
+    ``flat``. ``gallery_about_period``: each gallery print, and each rolled print compared with photos, compared at five
+    scales about the photos' ridge period, each pair at its best
+    (:func:`~fingersplat3d.eval.contact.prints_about_period`), and rolled prints in mm brought to that period, as photos
+    carry no scale; else every print as it is."""
     from tqdm import tqdm
 
     from ..eval.fingerprint import match_score
@@ -389,6 +403,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
     for i, (finger_a, capture_a, _, print_a) in enumerate(unrolled):
         if print_a.fingerprint is None:
             continue
+        about = _about_period(print_a, extractor) if gallery_about_period else (print_a.fingerprint,)
         for finger_b, capture_b, _, print_b in unrolled[i + 1:]:
             if capture_b != capture_a and print_b.fingerprint is not None:
                 rows.append({"protocol": "rolled", "probe": print_a.name, "gallery": print_b.name,
@@ -398,7 +413,7 @@ def run_match_evaluation(samples: list[Sample], out: Path, *, reconstructions: l
             if sample.capture != capture_a and sample.view == unrolled[i][2] and laid[k].fingerprint is not None:
                 rows.append({"protocol": "rolled vs photos", "probe": print_a.name, "gallery": sample.name,
                              "genuine": int(sample.finger == finger_a), "angle_deg": "",
-                             "score": match_score(print_a.fingerprint, laid[k].fingerprint)})
+                             "score": max(match_score(f, laid[k].fingerprint) for f in about)})
     contact = [_gallery_print(finger, path, extractor, gallery_about_period)
                for finger, path in tqdm(gallery, desc="prints (gallery)", unit="print", disable=not progress)]
     probes = ([("real", sample.finger, p) for sample, p in zip(samples, laid)]
