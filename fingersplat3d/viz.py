@@ -164,10 +164,11 @@ def _rig_tile(cameras: list, names: list[str], aligned: list[bool], size: int = 
     tile = np.full((size, size, 3), 255, np.uint8)
     cv2.circle(tile, to_pixels(np.zeros(2)), max(4, size // 20), (200, 170, 150), -1, cv2.LINE_AA)
     for k, xy in zip(placed, flat):
-        cv2.line(tile, to_pixels(xy), to_pixels(np.zeros(2)), (170, 170, 170), 1, cv2.LINE_AA)
-        cv2.circle(tile, to_pixels(xy), 6, (40, 80, 200), -1, cv2.LINE_AA)
+        dot = to_pixels(xy)
+        cv2.line(tile, dot, to_pixels(np.zeros(2)), (170, 170, 170), 1, cv2.LINE_AA)
+        cv2.circle(tile, dot, 6, (40, 80, 200), -1, cv2.LINE_AA)
         text_size = cv2.getTextSize(names[k], cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0]
-        origin = _label_origin(to_pixels(xy), xy, text_size, size)
+        origin = _label_origin(dot, xy, text_size, size)
         cv2.putText(tile, names[k], origin, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (30, 30, 30), 1, cv2.LINE_AA)
     return tile
 

@@ -45,9 +45,9 @@ def add(actions) -> None:
                        help="regular expression on the gallery's file stems with the named group 'finger', matching the "
                             "probes' finger (default: the whole stem, e.g. 1_1.png for UWA's 1_1_*)")
     match.add_argument("--gallery-as-is", action="store_true",
-                       help="compare the gallery's prints, and the rolled prints with photos, at their own scale only; by "
-                            "default each is compared at five scales about the photos' ridge period (9 px), each pair "
-                            "at its best, since photos carry no scale")
+                       help="compare the gallery's prints, and the rolled prints with photos, at their own scale "
+                            "only; by default each is compared at five scales about the photos' ridge period (9 px), "
+                            "each pair at its best, since photos carry no scale")
     handedness = match.add_mutually_exclusive_group()
     handedness.add_argument("--mirror", dest="mirror", action="store_const", const="yes", default="auto",
                             help="mirror the probes left-right before comparing them with the gallery (an inked, "

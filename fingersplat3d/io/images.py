@@ -14,8 +14,8 @@ import numpy as np
 from ..errors import InputError, input_error
 from ..atomic import atomic_path
 
-__all__ = ["HEIF_SUFFIXES", "IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files", "read_image", "read_images",
-           "write_image", "read_mask", "write_mask"]
+__all__ = ["HEIF_SUFFIXES", "IMAGE_SUFFIXES", "UNREAD_SUFFIXES", "unread_photos", "unread_photos_note", "find_files",
+           "read_image", "read_images", "write_image", "read_mask", "write_mask"]
 
 HEIF_SUFFIXES = (".heic", ".heif")
 """The photos an iPhone (and many Android phones) save by default: HEVC in a HEIF box, decoded by pillow-heif
@@ -92,7 +92,8 @@ def _read_heif(path: Path) -> np.ndarray:
     try:
         pixels = np.asarray(pillow_heif.open_heif(path, convert_hdr_to_8bit=True))
     except Exception as error:  # noqa: BLE001 - libheif's errors vary by release; any of them is an unreadable file
-        raise input_error(path, f"not a readable HEIC/HEIF image ({str(error).strip() or type(error).__name__})") from None
+        why = str(error).strip() or type(error).__name__
+        raise input_error(path, f"not a readable HEIC/HEIF image ({why})") from None
     if pixels.ndim == 3 and pixels.shape[2] >= 3:
         return np.ascontiguousarray(pixels[..., 2::-1])  # RGB(A) -> BGR, the alpha dropped
     return np.ascontiguousarray(pixels[..., 0] if pixels.ndim == 3 else pixels)  # grey (with alpha)
