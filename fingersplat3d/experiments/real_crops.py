@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUT_SHARE", "crop_without_tip", "tipless_window", "crop_table"]
+__all__ = ["CUT_SHARE", "crop_without_tip", "tipless_window", "filling_window", "crop_table"]
 
 CUT_SHARE = 0.3
 """The tip-side edge of the crop lies this share of the finger's width past the fingertip, along the finger."""
@@ -62,6 +62,28 @@ def tipless_window(mask: np.ndarray, share: float = CUT_SHARE) -> tuple[slice, s
         return None
     first, last = int(np.ceil(centre - half)), int(np.floor(centre + half)) + 1
     return (slice(None), slice(first, last)) if horizontal else (slice(first, last), slice(None))
+
+
+def filling_window(mask: np.ndarray, across: float, past_tip: float = 0.3, length: float = 1.6) -> tuple[slice, slice]:
+    """The rows and columns of a tight crop of the finger ``mask`` (``[H, W]`` bool) that it fills across its width: a
+    window ``across`` times the finger's width (:func:`~fingersplat3d.segment.silhouette.widest_disc`) about the pad's
+    middle across the finger (under 1: both flanks cut by the frame), from ``past_tip`` widths beyond the fingertip to
+    ``length`` widths behind it (the base cut), clipped to the image. A dataset's or a phone's close-up crop."""
+    from ..segment.silhouette import silhouette_frame, widest_disc
+
+    frame, width = silhouette_frame(mask), widest_disc(mask)
+    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
+    along_first = mask if horizontal else mask.T  # the finger runs along the columns
+    columns = np.nonzero(along_first.any(axis=0))[0]
+    sign = 1 if (frame.axis[0] if horizontal else frame.axis[1]) > 0 else -1
+    tip = columns.max() if sign > 0 else columns.min()
+    start, stop = sorted((int(tip + sign * past_tip * width), int(tip - sign * length * width)))
+    start, stop = max(start, 0), min(stop, along_first.shape[1])
+    rows = np.nonzero(along_first[:, start:stop].any(axis=1))[0]
+    middle = 0.5 * (rows.min() + rows.max())
+    first, last = max(int(middle - across * width / 2), 0), min(int(middle + across * width / 2), along_first.shape[0])
+    window = (slice(first, last), slice(start, stop))
+    return window if horizontal else window[::-1]
 
 
 def crop_table(records: list[dict], deviations: dict) -> str:

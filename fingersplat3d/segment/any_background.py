@@ -40,6 +40,10 @@ where a mask was found whose outline lies on no edge of the photo and which hold
 crossing cut is taken where it holds more of them and the photo's edges along its outline are twice as strong (a
 patch of a desk's grain was taken for the finger beside it; on clutter, things of every colour cross the ring).
 
+Where the finger fills the frame across its width (its skin over a fifth of the border ring or more), the ring is not
+the background these cuts take it for: a cut seeded from the image centre (:func:`~fingersplat3d.segment.filled_frame.
+filling_cut`) is taken instead, unless the other mask's outline lies on edges twice as strong.
+
 It fails with an :class:`~fingersplat3d.errors.InputError` when no ridge area stands out (a photo with no finger,
 or one too blurred to show ridges). Pure numpy/OpenCV.
 """
@@ -54,6 +58,7 @@ from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
 from ..structure_tensor import ridge_direction
+from .filled_frame import filling_cut
 from .morphology import dilated, disc, outline
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 from .silhouette import outline_swell, widest_disc
@@ -665,6 +670,9 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
     elif _on_no_edge(finger, work):  # ... or left out where a patch of the background's own texture was taken for it
         crossed = _crossing_cut(work, plain_evidence, finger)
         finger = finger if crossed is None else _best_supported((finger, crossed), work, grown=False)
+    filled = filling_cut(work.colour, work.colour8)  # a finger that fills the frame across its width: skin on the ring
+    if filled is not None:
+        finger = filled if finger is None else _best_supported((filled, finger), work, grown=False)
     if finger is None:
         raise InputError(f"{name}: {problem}")
     if factor < 1.0:  # back to full size with a smooth edge

@@ -50,6 +50,7 @@ import numpy as np
 from ..errors import InputError
 from ..robust import robust_sigma
 from .morphology import disc, outline
+from .filled_frame import BLACK_SHARE, MIN_DARK_RING, MIN_SKIN_SHARE, ring_skin
 from .neighbours import one_finger
 from .regions import crest_level, fill_holes, gradient_magnitude, largest_component, local_sums
 
@@ -80,9 +81,13 @@ def finger_mask(image: np.ndarray, *, name: str = "image") -> np.ndarray:
     :data:`DARK_BORDER_SHARE` of the image's bright end) by its ridges and GrabCut
     (:mod:`~fingersplat3d.segment.any_background`). A border ring up to :data:`HAZY_BORDER_SHARE` of the bright end
     (a dark background under haze or glare, a photo's contrast lowered) is also tried by brightness where the ridges
-    found no finger (blurred or faint)."""
+    found no finger (blurred or faint). A finger that fills the frame across its width, its skin over most of the ring
+    and a dark background over the rest, is taken by brightness too (:func:`_filled_dark_frame`)."""
     brightness = _brightness(image, name)
     if not _dark_border(brightness):
+        filled = _filled_dark_frame(image, brightness, name)
+        if filled is not None:
+            return filled
         from .any_background import finger_mask_any_background
 
         try:
@@ -124,6 +129,32 @@ def _bright_mask(brightness: np.ndarray, name: str) -> np.ndarray:
     if mask.mean() > MAX_COVERAGE:
         raise InputError(f"{name}: the finger covers {100 * mask.mean():.0f}% of the image, "
                          "so there is no background to separate it from")
+    return mask
+
+
+def _filled_dark_frame(image: np.ndarray, brightness: np.ndarray, name: str) -> np.ndarray | None:
+    """The finger's silhouette by brightness where it fills the frame across its width on a dark background
+    (:mod:`~fingersplat3d.segment.filled_frame`), or None where the photo is not that: under
+    :data:`~fingersplat3d.segment.filled_frame.MIN_DARK_RING` of the border ring dark, or a brightness mask that holds
+    the ring's skin (:func:`~fingersplat3d.segment.filled_frame.ring_skin`) over less than
+    :data:`~fingersplat3d.segment.filled_frame.MIN_SKIN_SHARE` of its part of the ring (a lit wall), or leaves a ring
+    that is not black (:data:`~fingersplat3d.segment.filled_frame.BLACK_SHARE`: a bright desk, the finger's shaded
+    flank its dark)."""
+    ring, skin = ring_skin(np.asarray(image, np.float32))
+    small = cv2.resize(brightness, ring.shape[::-1], interpolation=cv2.INTER_AREA)
+    step = max(1, int(np.sqrt(brightness.size / 65536)))
+    bright = float(np.percentile(brightness[::step, ::step], 90))
+    if np.count_nonzero(ring & (small <= DARK_BORDER_SHARE * bright)) < MIN_DARK_RING * np.count_nonzero(ring):
+        return None
+    try:
+        mask = _bright_mask(brightness, name)
+    except InputError:
+        return None
+    held = cv2.resize(mask.view(np.uint8), ring.shape[::-1], interpolation=cv2.INTER_NEAREST).view(bool)
+    crossed, left = ring & held, ring & ~held
+    if (np.count_nonzero(skin & crossed) < MIN_SKIN_SHARE * max(np.count_nonzero(crossed), 1)
+            or not left.any() or np.median(small[left]) > BLACK_SHARE * bright):
+        return None
     return mask
 
 
