@@ -59,6 +59,7 @@ from ..robust import robust_sigma
 from ..scene import scaled_size
 from ..structure_tensor import ridge_direction
 from .filled_frame import filling_cut
+from .grabcut import _colour_distance, _colour_floor, _gray, _grab_cut  # noqa: F401 - tests read them here
 from .morphology import dilated, disc, outline
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
 from .silhouette import outline_swell, widest_disc
@@ -153,17 +154,12 @@ EDGE_PERCENTILE = 25.0
 across the skin (a finger cut at both ends and halved lengthwise has half its outline there)."""
 MIN_OUTLINE_PX = 20
 """An outline with fewer pixels away from the border ring has no edge support to compare."""
-GRABCUT_ITERATIONS = 5
 EDGE_BLUR_PX = 2.0
 """The photo is blurred this much before the outline is put on its edge (:func:`_on_the_edge`): ridges fade, and a
 symmetric blur leaves the midpoint between the two sides on the edge."""
 EDGE_CONTRAST = 0.05
 """The least difference (share of the range) between the local finger and background colours for the outline to be
 moved onto the edge; elsewhere GrabCut's outline stays."""
-
-
-def _gray(image: np.ndarray) -> np.ndarray:
-    return image if image.ndim == 2 else image @ np.array([0.299, 0.587, 0.114], np.float32)
 
 
 def ridge_score(gray: np.ndarray, period: float, repeated: bool = False) -> np.ndarray:
@@ -286,34 +282,6 @@ def _largest_ridge_area(ridged: np.ndarray) -> tuple[np.ndarray, int] | None:
     return blobs == largest, int(stats[largest, cv2.CC_STAT_AREA])
 
 
-def _colour_floor(colour: np.ndarray) -> float:
-    """The spread added to each channel's standard deviation in the colour distances: 0.02 of the range (5 of 255 in
-    8-bit levels), so that a flat sample does not make every other colour infinitely far."""
-    return 5.0 if colour.dtype == np.uint8 else 0.02
-
-
-def _colour_distance(colour: np.ndarray, seed: np.ndarray, strict: bool = False) -> np.ndarray:
-    """Per pixel, the Mahalanobis distance of ``colour`` from the colours of the ``seed`` pixels (their mean and
-    covariance, :func:`_colour_floor` squared added to each channel's variance); ``strict``: at least their distance
-    in standard deviations per channel too.
-
-    Skin varies along its own colour, with the ridges and the shading: in standard deviations per channel a saturated
-    thing as bright as the skin came out as near as a shade of it (a grey finger's ridges spread every channel alike,
-    so purple clutter lay within 4 of them and went with the finger: real views on clutter at IoU 0.72). Across the
-    skin's colour its spread is small, and the covariance sees that; along it, it is more lenient, so ``strict``
-    (what may be *sure* finger) keeps the per-channel distance as a bound as well (a bright desk is a lighter grey)."""
-    skin = colour[seed].astype(np.float64)
-    floor = _colour_floor(colour)
-    spread = np.atleast_2d(np.cov(skin, rowvar=False)) if len(skin) > 1 else np.zeros((skin.shape[1],) * 2)
-    whiten = np.linalg.cholesky(np.linalg.inv(spread + floor * floor * np.eye(skin.shape[1])))
-    offset = colour.astype(np.float32) - skin.mean(0).astype(np.float32)
-    distance = np.linalg.norm(offset @ whiten.astype(np.float32), axis=-1)
-    if strict:
-        per_channel = offset / (skin.std(0) + floor).astype(np.float32)
-        distance = np.maximum(distance, np.linalg.norm(per_channel, axis=-1))
-    return distance
-
-
 def _sure_finger(area: np.ndarray, period: np.ndarray, colour: np.ndarray) -> np.ndarray:
     """What of an area of ridge evidence GrabCut may take as sure finger: its :func:`_core`, and the rest of the area
     whose colour is within :data:`SURE_SKIN_DISTANCE` of the core's and which joins it (the skin toward the pad's rim,
@@ -356,14 +324,6 @@ def _piece_pad(piece: np.ndarray, evidence: np.ndarray, period: np.ndarray, colo
         return None
     ridged = _sure_finger(found[0], period, colour)
     return ridged if ridged.any() else None
-
-
-def _grab_cut(colour8: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """OpenCV's GrabCut from ``labels`` (changed in place); what it keeps as finger, sure or probable."""
-    cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
-    background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    cv2.grabCut(colour8, labels, None, background_model, foreground_model, GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
-    return (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
 
 
 def _ridged_piece(colour8: np.ndarray, labels: np.ndarray, evidence: np.ndarray, least: float) -> np.ndarray | None:

@@ -104,7 +104,7 @@ def ring_skin(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     skin of the pad (the image centre's colour, textured like it; see the module docstring); no skin where the centre
     shows no ridges (:data:`MIN_BAND_OVER_NOISE`, :data:`MIN_RIDGE_CONTRAST`). ``image``: ``[H, W]`` or
     ``[H, W, 3]`` float in [0, 1]."""
-    from .any_background import _colour_distance, _gray
+    from .grabcut import _colour_distance, _gray
 
     colour = _working(image)
     height, width = colour.shape[:2]
@@ -137,7 +137,7 @@ def filling_cut(colour: np.ndarray, colour8: np.ndarray) -> np.ndarray | None:
     The other segmentation's cuts take the ring for background and weigh ridges against the image's median texture,
     the skin's here: on the real dev views cut to 0.6 of their width and composited onto a bright desk, out-of-focus
     and in-focus clutter, their mask IoU was 0.44 / 0.47 / 0.65 (median), this cut's 0.99 / 0.99 / 0.99."""
-    from .any_background import _colour_distance, _grab_cut
+    from .grabcut import _colour_distance, _grab_cut
     from .morphology import disc
     from .regions import fill_holes
 
