@@ -17,8 +17,8 @@ skin is the same on every background to 0.02-0.04 (a whole view 0.00-0.03 of its
 
 :func:`~fingersplat3d.segment.masks.finger_mask` takes a photo whose ring is not dark for a dark-background photo where
 at least :data:`MIN_DARK_RING` of the ring is dark, its brightness mask holds the ring's skin (:data:`MIN_SKIN_SHARE`)
-and leaves a black ring (:data:`BLACK_SHARE`); the other segmentation adds :func:`filling_cut` where the ring shows
-skin over :data:`FILL_SHARE` of it, preferred unless its rival's outline lies on edges twice as strong.
+and leaves a black ring (:data:`BLACK_SHARE`); the other segmentation takes :func:`filling_cut` where its own mask
+leaves out the ring's skin (:func:`holds_ring_skin`: a finger cut at both ends, carried out to the frame, holds it).
 Pure numpy/OpenCV.
 """
 from __future__ import annotations
@@ -28,8 +28,8 @@ import numpy as np
 
 from ..scene import scaled_size
 
-__all__ = ["ring_skin", "filling_cut", "FILL_SHARE", "WORK_SIDE", "TEXTURE_SHARE", "SKIN_DISTANCE", "MIN_DARK_RING",
-           "MIN_SKIN_SHARE", "BLACK_SHARE"]
+__all__ = ["ring_skin", "filling_cut", "holds_ring_skin", "HELD_SKIN", "FILL_SHARE", "WORK_SIDE", "TEXTURE_SHARE",
+           "SKIN_DISTANCE", "MIN_DARK_RING", "MIN_SKIN_SHARE", "BLACK_SHARE"]
 
 WORK_SIDE = 640
 """Long side (pixels) the ring is examined at."""
@@ -53,13 +53,16 @@ MIN_RIDGE_CONTRAST = 0.005
 ENERGY_SIGMA = 4.0
 """The band's square is averaged over this many pixels (about a ridge period)."""
 FILL_SHARE = 0.2
-"""A frame whose border ring is found skin (:func:`ring_skin`) over at least this share is cut by :func:`filling_cut`
-as well. Measured on the real dev views: whole 0.00-0.03, cut to the finger's width 0.07-0.28 (the other cut's masks
-hold there), to 0.8 of it 0.23-0.57."""
+"""A frame whose border ring is found skin (:func:`ring_skin`) over at least this share may be a finger filling it
+(:func:`filling_cut`, :func:`holds_ring_skin`). Measured on the real dev views: whole 0.00-0.03, cut to the finger's
+width 0.07-0.28, to 0.8 of it 0.23-0.57; cut at both ends (no tip, no base) 0.3-0.34, where the other cut's mask,
+carried out to the frame, holds the skin."""
 CLOSE_SHARE = 0.05
 """The ring's runs of skin are closed over this share of the long side (:func:`filling_cut`)."""
 NEAR_SKIN_DISTANCE = 5.0
 """Ring pixels within this colour distance of the pad's start as probable background, not sure (:func:`filling_cut`)."""
+HELD_SKIN = 0.5
+"""A mask holds the ring's skin where at least this share of it lies inside (:func:`holds_ring_skin`)."""
 MIN_DARK_RING = 0.1
 """A frame the finger fills still shows its background over at least this share of its ring (dark, for the
 dark-background segmentation; off the skin, for :func:`filling_cut`)."""
@@ -159,3 +162,13 @@ def filling_cut(colour: np.ndarray, colour8: np.ndarray) -> np.ndarray | None:
     held = np.unique(pieces[centre & finger])
     finger = fill_holes(np.isin(pieces, held[held > 0]))
     return finger if np.count_nonzero(outside & ~finger) >= MIN_DARK_RING * np.count_nonzero(ring) else None
+
+
+def holds_ring_skin(mask: np.ndarray, colour: np.ndarray) -> bool:
+    """Whether ``mask`` (``[h, w]`` bool at the working size of ``colour``) holds at least :data:`HELD_SKIN` of the
+    skin :func:`ring_skin` finds on the border ring, or the ring shows under :data:`FILL_SHARE` of skin (nothing to
+    hold). A cut that takes the ring for background leaves a finger filling the frame out along the ring; one carried
+    out to the frame where the finger crosses it (a crop cut at both ends) keeps it."""
+    ring, skin = ring_skin(colour)
+    found = np.count_nonzero(skin)
+    return found < FILL_SHARE * np.count_nonzero(ring) or np.count_nonzero(skin & mask) >= HELD_SKIN * found
