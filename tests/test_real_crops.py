@@ -56,3 +56,29 @@ def test_a_real_capture_cropped_to_no_tip_is_told_its_focal_is_not_held(real_dev
     assert any(warning.startswith(NO_TIP_WARNING) for warning in report["warnings"])  # no view's outline closes at the tip
     # measured 2.87 (1_1_1_1's crop before the growth: 1.49); the whole capture's pairs move 0.6-1.2 deg
     assert max(report["alignment"]["turn_sensitivity_deg"].values()) > 1.0
+
+
+@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+def test_a_crop_the_finger_fills_keeps_the_image_centre_and_the_tip(uwa640, turn):
+    """Whichever way the finger points, the tight crop is symmetric about the image centre, the frame cuts the finger
+    along both flanks (0.6 of its width kept), and the tip stays in view; no crop without a finger."""
+    from fingersplat3d.experiments.real_crops import centred_filling_window, crop_filling
+
+    image = np.rot90(uwa640.views[1].image, turn).copy()
+    mask = finger_mask(image)
+    window = centred_filling_window(mask, 0.6, past_tip=0.1)  # the synthetic tip lies 64 px from the edge
+    assert window is not None
+    for size, part in zip(image.shape[:2], window):
+        assert abs((part.start + part.stop - 1) - (size - 1)) <= 1  # centred
+    crop = mask[window]
+    along = 1 if turn % 2 == 0 else 0  # the synthetic finger lies along the image's columns before turning
+    flanks = (crop[0], crop[-1]) if along else (crop[:, 0], crop[:, -1])
+    assert all(flank.any() for flank in flanks)  # both flanks cut by the frame
+    kept = np.zeros_like(mask)
+    kept[window] = True
+    assert (mask & ~kept).sum() < 0.5 * mask.sum()  # most of the finger kept (its flanks and base cut) ...
+    ends = (crop[:, 0], crop[:, -1]) if along else (crop[0], crop[-1])
+    assert not all(end.any() for end in ends)  # ... the tip with it: background beyond it at one end
+    cropped = crop_filling(View("v", image), 0.6, past_tip=0.1)
+    np.testing.assert_array_equal(cropped.image, image[window])
+    assert crop_filling(View("blank", np.zeros((64, 80), np.float32))) is None

@@ -1,14 +1,17 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
-                                [--two-views] [--focal-px F] [--crop-tip [SHARE]] [--orders] [--mask-offset PX]
+                                [--two-views] [--focal-px F] [--crop-tip [SHARE] | --crop-sides [ACROSS]] [--orders]
+                                [--mask-offset PX]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
 table of docs/measurements.md and the machine it ran on. With ``--crop-tip``, each capture is also fused with its
 photos cropped about their centres, the fingertip outside the frame
 (:func:`fingersplat3d.experiments.real_crops.crop_without_tip`, in memory), and the crops' turns are measured against
-the whole captures' rig mean. With ``--orders``, instead, each capture is fused once per order of its photos (six,
+the whole captures' rig mean; with ``--crop-sides``, cropped about their centres so that the finger fills them across
+its width (ACROSS of it kept, the tip in view: :func:`fingersplat3d.experiments.real_crops.crop_filling`), the same.
+With ``--orders``, instead, each capture is fused once per order of its photos (six,
 :mod:`fingersplat3d.experiments.orders`): the rig table of each order and how far each capture moves with the order.
 With ``--mask-offset PX``, each view's finger mask is found on the photo, grown by PX pixels (shrunk where negative)
 and given to the fuse (:mod:`fingersplat3d.experiments.mask_offset`): how far the focal follows the outline.
@@ -54,16 +57,17 @@ def _measure_orders(job, guided_rounds: int, ridge_px: float, focal_px: float | 
     return {order: record | {"capture": job.name} for order, record in in_every_order(load_job(job), config).items()}
 
 
-def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float | None, share: float) -> dict | None:
+def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float | None, share: float,
+                     sides: bool = False) -> dict | None:
     from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.experiments.real import measure_real
-    from fingersplat3d.experiments.real_crops import crop_without_tip
+    from fingersplat3d.experiments.real_crops import crop_filling, crop_without_tip
     from fingersplat3d.io.jobs import load_job
     from fingersplat3d.pipeline import FuseConfig
     from fingersplat3d.scene import Capture
 
     capture = load_job(job)
-    views = [crop_without_tip(view, share) for view in capture.views]
+    views = [crop_filling(view, share) if sides else crop_without_tip(view, share) for view in capture.views]
     if any(view is None for view in views):
         return None
     config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
@@ -92,6 +96,10 @@ def main() -> int:
     parser.add_argument("--crop-tip", type=float, nargs="?", const=0.3, metavar="SHARE",
                         help="also fuse every capture cropped about its centre with the fingertip and SHARE (default 0.3) "
                              "of the finger's width behind it outside the frame, against the whole captures' rig")
+    parser.add_argument("--crop-sides", type=float, nargs="?", const=0.8, metavar="ACROSS",
+                        help="also fuse every capture cropped about its centre so that the finger fills it: ACROSS "
+                             "(default 0.8) of its width kept across it, the tip in view; against the whole captures' "
+                             "rig")
     parser.add_argument("--mask-offset", type=int, metavar="PX",
                         help="each view's finger mask found on the photo and grown by PX pixels (shrunk where negative; "
                              "0: as found), given to the fuse: how far the focal and the turns follow the outline")
@@ -103,7 +111,11 @@ def main() -> int:
         print(f"bench_real: --crop-tip {args.crop_tip:g}: the share of the finger's width cut behind the tip must lie "
               "in 0-2", file=sys.stderr)
         return 2
-    if args.mask_offset is not None and (args.orders or args.crop_tip is not None):
+    if args.crop_sides is not None and (args.crop_tip is not None or not 0.1 <= args.crop_sides <= 2.0):
+        print("bench_real: --crop-sides takes a share of the finger's width in 0.1-2, and not with --crop-tip",
+              file=sys.stderr)
+        return 2
+    if args.mask_offset is not None and (args.orders or args.crop_tip is not None or args.crop_sides is not None):
         print("bench_real: --mask-offset grows the masks of the whole captures' run only; --orders and --crop-tip find "
               "their own: run it alone", file=sys.stderr)
         return 2
@@ -135,20 +147,24 @@ def main() -> int:
     if args.two_views:
         print("\n" + two_view_table(summary))
     cropped = []
-    if args.crop_tip is not None:
+    if args.crop_tip is not None or args.crop_sides is not None:
         from fingersplat3d.eval.rig_consistency import deviation_against
         from fingersplat3d.experiments.real_crops import crop_table
 
         for job in list_jobs([args.data], args.select):
-            record = in_fresh_process(_measure_cropped, job, args.guided_rounds, args.ridge_px, args.focal_px, args.crop_tip)
+            sides = args.crop_sides is not None
+            record = in_fresh_process(_measure_cropped, job, args.guided_rounds, args.ridge_px, args.focal_px,
+                                      args.crop_sides if sides else args.crop_tip, sides)
             if record is None:
-                print(f"{job.name}: not cropped (no finger found, or its tip too far past the centre)", file=sys.stderr)
+                print(f"{job.name}: not cropped (no finger found, or the crop does not fit about the centre)",
+                      file=sys.stderr)
                 continue
             cropped.append(record)
             print(f"{job.name} cropped: {record['registered']}/3 registered, focal {record['focal']:.0f}", file=sys.stderr)
         deviations = deviation_against(cropped, records)
-        print(f"\nCropped about the centre, the fingertip and {args.crop_tip:g} of the finger's width outside the frame; "
-              "rig deviation against the whole captures' rig mean:\n")
+        how = (f"the finger filling the frame, {args.crop_sides:g} of its width kept, the tip in view" if sides else
+               f"the fingertip and {args.crop_tip:g} of the finger's width outside the frame")
+        print(f"\nCropped about the centre, {how}; rig deviation against the whole captures' rig mean:\n")
         print(crop_table(cropped, deviations))
     if args.json:
         args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary, "cropped": cropped},

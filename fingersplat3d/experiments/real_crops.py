@@ -15,10 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUT_SHARE", "crop_without_tip", "tipless_window", "filling_window", "crop_table"]
+__all__ = ["CUT_SHARE", "FILL_ACROSS", "crop_without_tip", "crop_filling", "tipless_window", "filling_window",
+           "centred_filling_window", "crop_table"]
 
 CUT_SHARE = 0.3
 """The tip-side edge of the crop lies this share of the finger's width past the fingertip, along the finger."""
+FILL_ACROSS = 0.8
+"""A crop that the finger fills keeps this share of the finger's width across it (:func:`crop_filling`)."""
 _MIN_HALF = 0.2  # the crop keeps at least this share of the finger's width on either side of the centre
 
 
@@ -83,6 +86,47 @@ def filling_window(mask: np.ndarray, across: float, past_tip: float = 0.3, lengt
     middle = 0.5 * (rows.min() + rows.max())
     first, last = max(int(middle - across * width / 2), 0), min(int(middle + across * width / 2), along_first.shape[0])
     window = (slice(first, last), slice(start, stop))
+    return window if horizontal else window[::-1]
+
+
+def crop_filling(view, across: float = FILL_ACROSS, past_tip: float = CUT_SHARE):
+    """``view`` cropped about its image centre so that the finger fills it across its width
+    (:func:`centred_filling_window`): a tight crop with both flanks cut and the tip in view, the principal point
+    kept. None when the finger is not found or the window does not fit in the photo."""
+    from ..errors import InputError
+    from ..scene import View
+    from ..segment.masks import finger_mask
+
+    try:
+        mask = finger_mask(view.image, name=view.name)
+    except InputError:
+        return None
+    keep = centred_filling_window(mask, across, past_tip)
+    return None if keep is None else View(view.name, view.image[keep])
+
+
+def centred_filling_window(mask: np.ndarray, across: float = FILL_ACROSS,
+                           past_tip: float = CUT_SHARE) -> tuple[slice, slice] | None:
+    """The rows and columns of a crop of the finger ``mask`` symmetric about the image centre (the principal point
+    stays where the fit assumes it): ``across`` times the finger's width across it, and along it from ``past_tip``
+    widths beyond the fingertip to as far on the other side of the centre (the base cut). None where the tip lies
+    on the far side of the centre, or the window does not fit in the image."""
+    from ..segment.silhouette import silhouette_frame, widest_disc
+
+    frame, width = silhouette_frame(mask), widest_disc(mask)
+    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
+    along_first = mask if horizontal else mask.T  # the finger runs along the columns
+    rows, columns = along_first.shape
+    seen = np.nonzero(along_first.any(axis=0))[0]
+    sign = 1 if (frame.axis[0] if horizontal else frame.axis[1]) > 0 else -1
+    tip = float(seen.max() if sign > 0 else seen.min())
+    centre_c, centre_r = (columns - 1) / 2.0, (rows - 1) / 2.0
+    half_c, half_r = sign * (tip - centre_c) + past_tip * width, across * width / 2.0
+    if width <= 0 or sign * (tip - centre_c) <= 0 or centre_c - half_c < 0 or centre_c + half_c > columns - 1 \
+            or centre_r - half_r < 0:
+        return None
+    window = (slice(int(np.ceil(centre_r - half_r)), int(np.floor(centre_r + half_r)) + 1),
+              slice(int(np.ceil(centre_c - half_c)), int(np.floor(centre_c + half_c)) + 1))
     return window if horizontal else window[::-1]
 
 
