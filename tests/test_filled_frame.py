@@ -64,7 +64,7 @@ def test_whole_photos_and_plain_frames_are_left_to_the_other_paths(real_dev):
     rng = np.random.default_rng(1)
     noise = (0.5 + 0.1 * rng.normal(size=(200, 300, 3))).clip(0, 1).astype(np.float32)
     work = _working_copy(noise)
-    assert filling_cut(work.colour, work.colour8) is None
+    assert filling_cut(work.colour, work.colour8, *ring_skin(work.colour)) is None
     desk = bright_desk((240, 320), rng)
     desk[:, :60] = 0.01
     assert masks._filled_dark_frame(desk, masks._brightness(desk, "desk"), "desk") is None
@@ -94,6 +94,7 @@ def test_a_finger_cut_at_both_ends_keeps_the_other_cut(real_dev):
     small_crop = cv2.resize(np.asarray(crop, np.float32), None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
     work = _working_copy(small_crop)
     small = cv2.resize(np.asarray(truth, np.uint8), work.gray.shape[::-1], interpolation=cv2.INTER_NEAREST).view(bool)
-    assert holds_ring_skin(small, work.colour)  # ... which the true mask holds
-    assert not holds_ring_skin(np.zeros_like(small), work.colour)
+    ring, skin = ring_skin(work.colour)
+    assert holds_ring_skin(small, ring, skin)  # ... which the true mask holds
+    assert not holds_ring_skin(np.zeros_like(small), ring, skin)
     assert mask_iou(finger_mask(crop), truth) > 0.97

@@ -41,22 +41,30 @@ def crop_without_tip(view, share: float = CUT_SHARE):
     return None if keep is None else View(view.name, view.image[keep])
 
 
+def _along_columns(mask: np.ndarray) -> tuple[np.ndarray, bool, int, float, float]:
+    """``(along, horizontal, sign, tip, width)``: the finger ``mask`` with the finger running along its columns (the
+    mask itself where it runs nearer the image's columns than its rows, ``horizontal``; else its transpose), ``+1``
+    where its tip lies toward the high columns and ``-1`` toward the low, the tip's column, and the finger's width
+    (:func:`~fingersplat3d.segment.silhouette.widest_disc`)."""
+    from ..segment.silhouette import silhouette_frame, widest_disc
+
+    frame = silhouette_frame(mask)
+    horizontal = bool(abs(frame.axis[0]) >= abs(frame.axis[1]))
+    along = mask if horizontal else mask.T
+    sign = 1 if (frame.axis[0] if horizontal else frame.axis[1]) > 0 else -1
+    seen = np.nonzero(along.any(axis=0))[0]
+    return along, horizontal, sign, float(seen.max() if sign > 0 else seen.min()), widest_disc(mask)
+
+
 def tipless_window(mask: np.ndarray, share: float = CUT_SHARE) -> tuple[slice, slice] | None:
     """The rows and columns of a crop of the finger ``mask`` (``[H, W]`` bool) about the image centre along the image
     axis nearest the finger's, the fingertip and ``share`` of the finger's width behind it outside the window (at least
     :data:`_MIN_HALF` of the width kept each side of the centre, the tip still half that share outside); None when its
     tip lies too near or past the centre for that."""
-    from ..segment.silhouette import silhouette_frame, widest_disc
-
-    frame = silhouette_frame(mask)
-    width = widest_disc(mask)
-    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
-    along = 1 if horizontal else 0  # the image axis index the finger runs along: columns (1) or rows (0)
-    size = mask.shape[along]
+    along, horizontal, sign, tip, width = _along_columns(mask)
+    size = along.shape[1]
     centre = (size - 1) / 2.0
-    coordinate = np.nonzero(mask.any(axis=1 - along))[0]
-    toward_high = (frame.axis[0] if horizontal else frame.axis[1]) > 0
-    tip = float(coordinate.max() if toward_high else coordinate.min())
+    toward_high = sign > 0
     cut = tip - share * width if toward_high else tip + share * width
     half = max(abs(cut - centre), _MIN_HALF * width)
     edge = centre + half if toward_high else centre - half  # the crop's tip-side edge
@@ -72,14 +80,7 @@ def filling_window(mask: np.ndarray, across: float, past_tip: float = 0.3, lengt
     window ``across`` times the finger's width (:func:`~fingersplat3d.segment.silhouette.widest_disc`) about the pad's
     middle across the finger (under 1: both flanks cut by the frame), from ``past_tip`` widths beyond the fingertip to
     ``length`` widths behind it (the base cut), clipped to the image. A dataset's or a phone's close-up crop."""
-    from ..segment.silhouette import silhouette_frame, widest_disc
-
-    frame, width = silhouette_frame(mask), widest_disc(mask)
-    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
-    along_first = mask if horizontal else mask.T  # the finger runs along the columns
-    columns = np.nonzero(along_first.any(axis=0))[0]
-    sign = 1 if (frame.axis[0] if horizontal else frame.axis[1]) > 0 else -1
-    tip = columns.max() if sign > 0 else columns.min()
+    along_first, horizontal, sign, tip, width = _along_columns(mask)
     start, stop = sorted((int(tip + sign * past_tip * width), int(tip - sign * length * width)))
     start, stop = max(start, 0), min(stop, along_first.shape[1])
     rows = np.nonzero(along_first[:, start:stop].any(axis=1))[0]
@@ -111,15 +112,8 @@ def centred_filling_window(mask: np.ndarray, across: float = FILL_ACROSS,
     stays where the fit assumes it): ``across`` times the finger's width across it, and along it from ``past_tip``
     widths beyond the fingertip to as far on the other side of the centre (the base cut). None where the tip lies
     on the far side of the centre, or the window does not fit in the image."""
-    from ..segment.silhouette import silhouette_frame, widest_disc
-
-    frame, width = silhouette_frame(mask), widest_disc(mask)
-    horizontal = abs(frame.axis[0]) >= abs(frame.axis[1])
-    along_first = mask if horizontal else mask.T  # the finger runs along the columns
+    along_first, horizontal, sign, tip, width = _along_columns(mask)
     rows, columns = along_first.shape
-    seen = np.nonzero(along_first.any(axis=0))[0]
-    sign = 1 if (frame.axis[0] if horizontal else frame.axis[1]) > 0 else -1
-    tip = float(seen.max() if sign > 0 else seen.min())
     centre_c, centre_r = (columns - 1) / 2.0, (rows - 1) / 2.0
     half_c, half_r = sign * (tip - centre_c) + past_tip * width, across * width / 2.0
     if width <= 0 or sign * (tip - centre_c) <= 0 or centre_c - half_c < 0 or centre_c + half_c > columns - 1 \

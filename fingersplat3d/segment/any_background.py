@@ -58,7 +58,7 @@ from ..errors import InputError
 from ..robust import robust_sigma
 from ..scene import scaled_size
 from ..structure_tensor import ridge_direction
-from .filled_frame import filling_cut, holds_ring_skin
+from .filled_frame import filling_cut, holds_ring_skin, ring_skin
 from .grabcut import _colour_distance, _colour_floor, _gray, _grab_cut  # noqa: F401 - tests read them here
 from .morphology import dilated, disc, outline
 from .regions import crest_level, fill_holes, gradient_magnitude, local_sums
@@ -606,12 +606,14 @@ def _filled_or(finger: np.ndarray | None, work: _Work) -> np.ndarray | None:
     clutter, the other cuts' masks held the ring's skin at 0.86-0.88 but lay on edges of 0.06 of the photo's scale
     (IoU 0.70-0.73), the filling cut's on 0.08-0.13 (0.73-0.92); cut at both ends instead, the other cuts' masks lay on
     0.33-1.29 (IoU 0.95-1.00) and the filling cut's were at times worse (0.68-0.83), so those are kept."""
-    if finger is not None and holds_ring_skin(finger, work.colour) and not _on_no_edge(finger, work):
+    ring, skin = ring_skin(work.colour)  # once: each test below asks of the same ring
+    held = finger is not None and holds_ring_skin(finger, ring, skin)
+    if held and not _on_no_edge(finger, work):
         return finger
-    filled = filling_cut(work.colour, work.colour8)
-    if filled is None or not holds_ring_skin(filled, work.colour):
+    filled = filling_cut(work.colour, work.colour8, ring, skin)
+    if filled is None or not holds_ring_skin(filled, ring, skin):
         return finger
-    if finger is None or not holds_ring_skin(finger, work.colour):
+    if not held:
         return filled
     ours, theirs = _edge_support(filled, work), _edge_support(finger, work)
     return filled if ours is not None and (theirs is None or ours > theirs) else finger

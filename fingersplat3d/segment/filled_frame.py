@@ -127,15 +127,15 @@ def ring_skin(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ring, skin
 
 
-def filling_cut(colour: np.ndarray, colour8: np.ndarray) -> np.ndarray | None:
+def filling_cut(colour: np.ndarray, colour8: np.ndarray, ring: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
     """The finger's mask at the working size where it fills the frame (at least :data:`FILL_SHARE` of the border ring
     found skin by :func:`ring_skin`), else None: one GrabCut told that the image centre is finger, the ring's skin
     (its runs closed over :data:`CLOSE_SHARE` of the long side: the shaded skin between them) probable finger, the
     rest of the ring background (probable only where it lies within :data:`NEAR_SKIN_DISTANCE` of the pad's colour:
     a flank darker than the pad); the pieces that hold the centre, holes filled. None too where under
     :data:`MIN_DARK_RING` of the ring is left to background, before the cut or after it (a frame inside the finger, a
-    texture of one colour). ``colour``: ``[h, w, 3]`` float32
-    in [0, 1] at the working size, ``colour8`` the same in 8 bits.
+    texture of one colour). ``colour``: ``[h, w, 3]`` float32 in [0, 1] at the working size, ``colour8`` the same in 8
+    bits, ``ring`` and ``skin`` its :func:`ring_skin`.
 
     The other segmentation's cuts take the ring for background and weigh ridges against the image's median texture,
     the skin's here: on the real dev views cut to 0.6 of their width and composited onto a bright desk, out-of-focus
@@ -144,7 +144,6 @@ def filling_cut(colour: np.ndarray, colour8: np.ndarray) -> np.ndarray | None:
     from .morphology import disc
     from .regions import fill_holes
 
-    ring, skin = ring_skin(colour)
     if np.count_nonzero(skin) < FILL_SHARE * np.count_nonzero(ring):
         return None
     closing = disc(max(3, int(CLOSE_SHARE * max(ring.shape))))
@@ -164,11 +163,10 @@ def filling_cut(colour: np.ndarray, colour8: np.ndarray) -> np.ndarray | None:
     return finger if np.count_nonzero(outside & ~finger) >= MIN_DARK_RING * np.count_nonzero(ring) else None
 
 
-def holds_ring_skin(mask: np.ndarray, colour: np.ndarray) -> bool:
-    """Whether ``mask`` (``[h, w]`` bool at the working size of ``colour``) holds at least :data:`HELD_SKIN` of the
-    skin :func:`ring_skin` finds on the border ring, or the ring shows under :data:`FILL_SHARE` of skin (nothing to
+def holds_ring_skin(mask: np.ndarray, ring: np.ndarray, skin: np.ndarray) -> bool:
+    """Whether ``mask`` (``[h, w]`` bool at the working size) holds at least :data:`HELD_SKIN` of the ``skin``
+    :func:`ring_skin` finds on the border ``ring``, or the ring shows under :data:`FILL_SHARE` of skin (nothing to
     hold). A cut that takes the ring for background leaves a finger filling the frame out along the ring; one carried
     out to the frame where the finger crosses it (a crop cut at both ends) keeps it."""
-    ring, skin = ring_skin(colour)
     found = np.count_nonzero(skin)
     return found < FILL_SHARE * np.count_nonzero(ring) or np.count_nonzero(skin & mask) >= HELD_SKIN * found

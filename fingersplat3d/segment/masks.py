@@ -142,8 +142,7 @@ def _filled_dark_frame(image: np.ndarray, brightness: np.ndarray, name: str) -> 
     flank its dark)."""
     ring, skin = ring_skin(np.asarray(image, np.float32))
     small = cv2.resize(brightness, ring.shape[::-1], interpolation=cv2.INTER_AREA)
-    step = max(1, int(np.sqrt(brightness.size / 65536)))
-    bright = float(np.percentile(brightness[::step, ::step], 90))
+    bright = _bright_end(brightness)
     if np.count_nonzero(ring & (small <= DARK_BORDER_SHARE * bright)) < MIN_DARK_RING * np.count_nonzero(ring):
         return None
     try:
@@ -158,6 +157,12 @@ def _filled_dark_frame(image: np.ndarray, brightness: np.ndarray, name: str) -> 
     return mask
 
 
+def _bright_end(brightness: np.ndarray) -> float:
+    """The image's bright end: its 90th-percentile brightness, over ~65k pixels."""
+    step = max(1, int(np.sqrt(brightness.size / 65536)))
+    return float(np.percentile(brightness[::step, ::step], 90))
+
+
 def _dark_border(brightness: np.ndarray, share: float = DARK_BORDER_SHARE) -> bool:
     """Whether the frame's border ring (2 % of the long side) is dark: its median at most ``share`` of the image's
     90th percentile brightness. A finger enters the frame at one side at most two, so the ring is mostly background."""
@@ -165,8 +170,7 @@ def _dark_border(brightness: np.ndarray, share: float = DARK_BORDER_SHARE) -> bo
     ring = max(1, int(0.02 * max(height, width)))
     border = np.concatenate([brightness[:ring].ravel(), brightness[-ring:].ravel(),
                              brightness[:, :ring].ravel(), brightness[:, -ring:].ravel()])
-    step = max(1, int(np.sqrt(brightness.size / 65536)))
-    bright = float(np.percentile(brightness[::step, ::step], 90))
+    bright = _bright_end(brightness)
     return bool(np.median(border) <= share * bright)
 
 
