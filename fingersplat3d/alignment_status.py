@@ -20,7 +20,8 @@ from .segment.silhouette import TIP_BASES
 
 __all__ = ["MAX_RESIDUAL_PX", "MAX_TURN_UNCERTAINTY_DEG", "MAX_TURN_SENSITIVITY_DEG", "MAX_TURN_SHORTFALL_DEG", "AT_BOUND_DEG",
            "SKIN_LOOP_MIN_MATCHES", "NO_LOOP_WARNING", "NO_TIP_WARNING", "NO_TIP_SENSITIVITY_DEG", "alignment_status",
-           "TWO_VIEWS_WARNING", "skin_loop", "warn", "warn_two_views", "warn_without_loop", "warn_without_tip"]
+           "TWO_VIEWS_WARNING", "skin_loop", "warn", "warn_two_views", "warn_without_loop", "warn_without_tip",
+           "SIDES_CUT_WARNING", "TIGHT_CROP_SHARE", "warn_sides_cut"]
 
 MAX_RESIDUAL_PX = 3.0  # a global alignment residual above this (pixels across the ridges) means wrong cameras
 MAX_TURN_UNCERTAINTY_DEG = 0.2  # a pair turn whose curvature-based sigma exceeds this is warned about (docs/measurements.md)
@@ -90,6 +91,7 @@ def alignment_status(capture: Capture, pairs: list[tuple[int, int]], alignment: 
                  f"it moves more than {MAX_TURN_SENSITIVITY_DEG:g}° (real captures: errors up to three times that move)"
                  + _short_end_taken(probe) + "; the cameras' focal (--focal-px, --rig, or photos whose EXIF records it) or more views fix it")
     warn_without_tip(alignment, report)
+    warn_sides_cut(alignment, report)
     warn_without_loop(alignment, status, report)
     _check_turns_against_widths(capture, alignment, status, report)
     warn_two_views(alignment, report, turn_warned=len(report.get("warnings", [])) > said)
@@ -208,6 +210,33 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
                  "1-5° off, the focal up to 50 % off); the cameras' focal (--focal-px, --rig, or photos whose EXIF "
                  "records it) helps"))
         warn(report, f"{NO_TIP_WARNING} (the frame cuts every view at both ends): {said}")
+
+
+SIDES_CUT_WARNING = "the frame cuts every view along the finger's sides"
+"""How the warning of :func:`warn_sides_cut` begins."""
+TIGHT_CROP_SHARE = 0.5
+""":func:`warn_sides_cut`: a view the frame cuts along a side over this share of its stations along the finger (the
+report's ``registration.tip[view].sides_cut``) shows no outline of the finger there. Real dev views cropped to 0.8 of
+the finger's width: 0.8-1.0; whole real and synthetic views: 0 (docs/measurements.md, stop 104)."""
+
+
+def warn_sides_cut(alignment: GlobalAlignment, report: dict) -> None:
+    """A warning where two views or more were aligned without a rig and the frame cuts every registered one along the
+    finger's sides (:data:`TIGHT_CROP_SHARE`): a tight crop or a close-up the finger fills across its width. No view
+    shows the finger's width there, so the prior's section, and the turns the fit finds through it, are a guess: real
+    dev captures cut so came out 4-33 degrees off at their worst pair (median; up to 58) with the focal fitted or
+    given, four of nine with the focal given with no other warning (docs/measurements.md, stop 104). With the focal
+    given too: it does not fix the section."""
+    tips = report.get("registration", {}).get("tip", {})
+    names = report.get("views", [])
+    placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
+    if not _fitted_without_rig(alignment) or len(placed) < 2 or any(tip is None for tip in placed):
+        return
+    if all(tip.get("sides_cut", 0.0) >= TIGHT_CROP_SHARE for tip in placed):
+        warn(report, f"{SIDES_CUT_WARNING} (a tight crop or a close-up the finger fills across its width): no "
+                     "view shows its width there, so its section is the prior's guess and the turns rest on it "
+                     "(real captures cut so: the worst pair 4-33° off at the median, up to 58°, the focal fitted or "
+                     "given); photos that show the finger's whole width fix it")
 
 
 def _fitted_without_rig(alignment: GlobalAlignment) -> bool:

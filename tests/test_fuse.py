@@ -557,3 +557,27 @@ def test_a_capture_without_a_visible_tip_is_warned(bases, probe, moves, warned):
     assert bool(said) == warned
     if said:  # the remedy: the focal where it was fitted, a rig or the tip where it was given
         assert ("--focal-px" in said[0]) == (probe is not None) and ("--rig" in said[0])
+
+
+@pytest.mark.parametrize("shares, probe, warned", [
+    ((0.94, 0.95, 0.97), {"held": True}, True),  # a tight crop, focal fitted
+    ((0.94, 0.95, 0.97), None, True),  # the focal given does not fix the section
+    ((0.94, 0.3, 0.97), {"held": True}, False),  # one view shows the finger's width over most of its length
+    ((None, None, None), {"held": True}, False),  # whole views: the report names no cut sides
+    ((0.94, 0.95, 0.97), "rig", False),  # a rig holds the poses (no curvature reported)
+])
+def test_a_capture_the_frame_cuts_along_the_sides_is_warned(shares, probe, warned):
+    from types import SimpleNamespace
+
+    from fingersplat3d.alignment_status import SIDES_CUT_WARNING, TIGHT_CROP_SHARE, warn_sides_cut
+
+    if warned:
+        assert min(shares) >= TIGHT_CROP_SHARE
+    names = ["left", "center", "right"]
+    tips = {n: {"side": "left", "why": "outline"} | ({} if share is None else {"sides_cut": share})
+            for n, share in zip(names, shares)}
+    report = {"views": names, "warnings": [], "registration": {"tip": tips}}
+    alignment = SimpleNamespace(aligned=[True, True, True], focal_probe=None if probe == "rig" else probe,
+                                turn_uncertainty_deg=None if probe == "rig" else np.full((3, 3), 0.05))
+    warn_sides_cut(alignment, report)
+    assert any(w.startswith(SIDES_CUT_WARNING) for w in report["warnings"]) == warned

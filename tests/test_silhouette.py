@@ -113,6 +113,24 @@ def test_a_stub_entering_the_frame_runs_from_its_cut():
     assert abs(frame.axis[0]) > 0.99 and frame.tip_basis == "outline" and frame.tip_side == "left"
 
 
+@pytest.mark.parametrize("transpose", [False, True])
+@pytest.mark.parametrize("centre", [80, 120, 40])
+def test_a_finger_filling_the_frame_across_keeps_its_axis_along_it(centre, transpose):
+    """A tight crop or a close-up: a finger 200 px wide in a frame 160 px high, cut along both flanks (``centre`` 80)
+    or one (120: the top flank in view; 40: the bottom one) and at its base by the right edge, the tip in view at the
+    left. Neither its long cut flanks (the long crop reads as cut at both ends) nor one long flank against the short
+    base may turn its axis across the finger (real dev views cropped so lost every chart vote, stop 104)."""
+    v, u = np.mgrid[:160, :600]
+    mask = ((np.abs(v - centre) <= 100) & (u >= 120)) | ((u - 120) ** 2 + (v - centre) ** 2 <= 100 ** 2)
+    along = np.array([1.0, 0.0])
+    if transpose:
+        mask, along = np.ascontiguousarray(mask.T), along[::-1]
+    frame = silhouette_frame(mask)
+    assert abs(frame.axis @ along) > 0.99
+    assert frame.tip_basis == "outline" and frame.tip_side == ("top" if transpose else "left")
+    assert abs(finger_height(mask).axis @ along) > 0.99  # the prior's relief runs the same way
+
+
 def test_a_finger_whole_in_the_frame_or_cut_at_a_corner_keeps_its_longest_direction():
     whole = np.pad(crop(rows=120, cols=400, top=80, bottom=100), 5)
     corner = np.zeros((300, 300), bool)

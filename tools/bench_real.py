@@ -1,8 +1,8 @@
 """Real rig captures without ground truth: registration, rig consistency, focal spread, leave-one-view-out.
 
     python3 tools/bench_real.py [--data ../shared/data/uwa-real-dev] [--select finger=2] [--ridge-px 8] [--json out.json]
-                                [--two-views] [--focal-px F] [--crop-tip [SHARE] | --crop-sides [ACROSS]] [--orders]
-                                [--mask-offset PX]
+                                [--two-views] [--focal-px F] [--crop-tip [SHARE] | --crop-sides [ACROSS] [--on-finger]]
+                                [--orders] [--mask-offset PX]
 
 Each UWA capture (frames 0-2) is fused geometry-only in a fresh process
 (:func:`fingersplat3d.experiments.real.measure_real`, leave-one-view-out on); prints the markdown
@@ -10,7 +10,8 @@ table of docs/measurements.md and the machine it ran on. With ``--crop-tip``, ea
 photos cropped about their centres, the fingertip outside the frame
 (:func:`fingersplat3d.experiments.real_crops.crop_without_tip`, in memory), and the crops' turns are measured against
 the whole captures' rig mean; with ``--crop-sides``, cropped about their centres so that the finger fills them across
-its width (ACROSS of it kept, the tip in view: :func:`fingersplat3d.experiments.real_crops.crop_filling`), the same.
+its width (ACROSS of it kept, the tip in view: :func:`fingersplat3d.experiments.real_crops.crop_filling`), the same;
+with ``--on-finger`` as well, cropped about the finger's pad instead, as a dataset crops (the principal point moves).
 With ``--orders``, instead, each capture is fused once per order of its photos (six,
 :mod:`fingersplat3d.experiments.orders`): the rig table of each order and how far each capture moves with the order.
 With ``--mask-offset PX``, each view's finger mask is found on the photo, grown by PX pixels (shrunk where negative)
@@ -58,7 +59,7 @@ def _measure_orders(job, guided_rounds: int, ridge_px: float, focal_px: float | 
 
 
 def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float | None, share: float,
-                     sides: bool = False) -> dict | None:
+                     sides: bool = False, on_finger: bool = False) -> dict | None:
     from fingersplat3d.align.register import RegistrationConfig
     from fingersplat3d.experiments.real import measure_real
     from fingersplat3d.experiments.real_crops import crop_filling, crop_without_tip
@@ -67,7 +68,8 @@ def _measure_cropped(job, guided_rounds: int, ridge_px: float, focal_px: float |
     from fingersplat3d.scene import Capture
 
     capture = load_job(job)
-    views = [crop_filling(view, share) if sides else crop_without_tip(view, share) for view in capture.views]
+    views = [crop_filling(view, share, on_finger=on_finger) if sides else crop_without_tip(view, share)
+             for view in capture.views]
     if any(view is None for view in views):
         return None
     config = FuseConfig(splat=None, registration=RegistrationConfig(guided_rounds=guided_rounds), ridge_px=ridge_px or None,
@@ -100,6 +102,9 @@ def main() -> int:
                         help="also fuse every capture cropped about its centre so that the finger fills it: ACROSS "
                              "(default 0.8) of its width kept across it, the tip in view; against the whole captures' "
                              "rig")
+    parser.add_argument("--on-finger", action="store_true",
+                        help="with --crop-sides: crop about the finger's pad instead of the image centre, as a dataset "
+                             "crops (the principal point moves with the crop, unknown to the fuse)")
     parser.add_argument("--mask-offset", type=int, metavar="PX",
                         help="each view's finger mask found on the photo and grown by PX pixels (shrunk where negative; "
                              "0: as found), given to the fuse: how far the focal and the turns follow the outline")
@@ -114,6 +119,9 @@ def main() -> int:
     if args.crop_sides is not None and (args.crop_tip is not None or not 0.1 <= args.crop_sides <= 2.0):
         print("bench_real: --crop-sides takes a share of the finger's width in 0.1-2, and not with --crop-tip",
               file=sys.stderr)
+        return 2
+    if args.on_finger and args.crop_sides is None:
+        print("bench_real: --on-finger goes with --crop-sides", file=sys.stderr)
         return 2
     if args.mask_offset is not None and (args.orders or args.crop_tip is not None or args.crop_sides is not None):
         print("bench_real: --mask-offset grows the masks of the whole captures' run only; --orders and --crop-tip find "
@@ -154,7 +162,7 @@ def main() -> int:
         for job in list_jobs([args.data], args.select):
             sides = args.crop_sides is not None
             record = in_fresh_process(_measure_cropped, job, args.guided_rounds, args.ridge_px, args.focal_px,
-                                      args.crop_sides if sides else args.crop_tip, sides)
+                                      args.crop_sides if sides else args.crop_tip, sides, args.on_finger)
             if record is None:
                 print(f"{job.name}: not cropped (no finger found, or the crop does not fit about the centre)",
                       file=sys.stderr)
@@ -164,7 +172,8 @@ def main() -> int:
         deviations = deviation_against(cropped, records)
         how = (f"the finger filling the frame, {args.crop_sides:g} of its width kept, the tip in view" if sides else
                f"the fingertip and {args.crop_tip:g} of the finger's width outside the frame")
-        print(f"\nCropped about the centre, {how}; rig deviation against the whole captures' rig mean:\n")
+        where = "the finger's pad (the principal point moved)" if args.on_finger else "the centre"
+        print(f"\nCropped about {where}, {how}; rig deviation against the whole captures' rig mean:\n")
         print(crop_table(cropped, deviations))
     if args.json:
         args.json.write_text(json.dumps({"machine": info, "records": records, "summary": summary, "cropped": cropped},

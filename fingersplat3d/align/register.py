@@ -50,7 +50,7 @@ import numpy as np
 from ..device import per_item
 from ..pointmaps.base import Pointmap
 from ..scene import View
-from ..segment.side_cut import capture_frames
+from ..segment.side_cut import SIDE_CUT_SHARE, capture_frames, sides_cut_share
 from ..segment.silhouette import SIDE_CUT_WIDTHS, TIP_BASES, capture_axes, capture_finger_axes, silhouette_frame
 from .axis_tilt import tilt_deg, view_tilts
 from .correspond.chart import CylinderChart
@@ -338,8 +338,11 @@ def register_views(views: Sequence[View], pointmaps: Sequence[Pointmap], config:
     # One tip end for the whole capture: on crops cut at both ends a view's own choice can disagree
     # with the others', and charts running opposite ways share no turn.
     frames = capture_frames(prepared.masks)
+    shares = [sides_cut_share(mask, frame) for mask, frame in zip(prepared.masks, frames)]
     tips = [{"side": frame.tip_side, "why": TIP_BASES[frame.tip_basis]}
-            | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {}) for frame in frames]
+            | ({"widths": SIDE_CUT_WIDTHS} if frame.widths_from_views else {})
+            | ({"sides_cut": round(share, 2)} if share > SIDE_CUT_SHARE else {})
+            for frame, share in zip(frames, shares)]
     if config.matcher == "surface":
         charts, unwrapped = prepared.charts(frames)
     rng = np.random.default_rng(config.seed)

@@ -140,7 +140,7 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
     """One real capture fused (geometry only unless ``config`` says otherwise): a record for :func:`summarize_real`.
     ``two_views``: also every pair of views fused alone, against the same turn with all three
     (:func:`two_view_turn_errors`)."""
-    from ..alignment_status import NO_LOOP_WARNING, NO_TIP_WARNING
+    from ..alignment_status import NO_LOOP_WARNING, NO_TIP_WARNING, SIDES_CUT_WARNING
     from ..pipeline import FuseConfig, fuse
     from ..scene import Capture
 
@@ -158,7 +158,8 @@ def measure_real(capture, config=None, leave_one_out: bool = False, two_views: b
               "turn_uncertainty_deg": report["alignment"].get("turn_uncertainty_deg", {}),
               "turn_sensitivity_deg": report["alignment"].get("turn_sensitivity_deg", {}),
               "focal_probe": report["alignment"].get("focal_probe", {}),
-              "warned_turns": any(any(text in str(w) for text in (_TURN_WARNING, NO_TIP_WARNING, NO_LOOP_WARNING))
+              "warned_turns": any(any(text in str(w) for text in (_TURN_WARNING, NO_TIP_WARNING, NO_LOOP_WARNING,
+                                                                  SIDES_CUT_WARNING))
                                   for w in report.get("warnings", [])),
               "sizes": [[v.width, v.height] for v in capture.views],
               "world_to_cam": [c.world_to_cam.tolist() for c in three.cameras],

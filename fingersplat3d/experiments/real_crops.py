@@ -90,10 +90,11 @@ def filling_window(mask: np.ndarray, across: float, past_tip: float = 0.3, lengt
     return window if horizontal else window[::-1]
 
 
-def crop_filling(view, across: float = FILL_ACROSS, past_tip: float = CUT_SHARE):
+def crop_filling(view, across: float = FILL_ACROSS, past_tip: float = CUT_SHARE, on_finger: bool = False):
     """``view`` cropped about its image centre so that the finger fills it across its width
     (:func:`centred_filling_window`): a tight crop with both flanks cut and the tip in view, the principal point
-    kept. None when the finger is not found or the window does not fit in the photo."""
+    kept; ``on_finger``: about the finger's pad instead (:func:`filling_window`), as a dataset crops, the principal
+    point moved with the crop. None when the finger is not found or the window does not fit in the photo."""
     from ..errors import InputError
     from ..scene import View
     from ..segment.masks import finger_mask
@@ -102,7 +103,7 @@ def crop_filling(view, across: float = FILL_ACROSS, past_tip: float = CUT_SHARE)
         mask = finger_mask(view.image, name=view.name)
     except InputError:
         return None
-    keep = centred_filling_window(mask, across, past_tip)
+    keep = filling_window(mask, across, past_tip) if on_finger else centred_filling_window(mask, across, past_tip)
     return None if keep is None else View(view.name, view.image[keep])
 
 

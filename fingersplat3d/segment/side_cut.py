@@ -17,7 +17,8 @@ import numpy as np
 from .silhouette import (SilhouetteFrame, WidthReference, capture_axes, finger_axis, mask_pixels, orient_frames,
                          raw_chords, silhouette_frame)
 
-__all__ = ["capture_frames", "side_cut_widths", "SIDE_CUT_SHARE", "MIN_SHARED_STATIONS", "CAP_FALLBACK"]
+__all__ = ["capture_frames", "side_cut_widths", "sides_cut_share", "SIDE_CUT_SHARE", "MIN_SHARED_STATIONS",
+           "CAP_FALLBACK"]
 
 SIDE_CUT_SHARE = 0.2
 """:func:`side_cut_widths`: a view whose chords the image border cuts at one side over this share of its stations (a
@@ -102,6 +103,20 @@ def side_cut_widths(masks: Sequence[np.ndarray], frames: Sequence[SilhouetteFram
         expected[known] = np.nanmedian(stacked[:, known], axis=0)
         references.append(_reference(frame, sigma, expected))
     return references
+
+
+def sides_cut_share(mask: np.ndarray, frame: SilhouetteFrame) -> float:
+    """The share of a view's stations along the finger whose chord the image border cuts at one side or both: the
+    frame cutting the finger along its flanks (a tight crop, a close-up the finger fills across), not across its end
+    (a finger leaving the frame at its base cuts a station or two). 0 for a view whose outline the frame does not touch
+    along the finger (:func:`_may_be_side_cut`, read first: the stations cost more)."""
+    mask = np.asarray(mask, bool)
+    if not _may_be_side_cut(mask, frame.axis):
+        return 0.0
+    u, v, on_border = mask_pixels(mask)
+    s, t = frame.coordinates(np.stack([u, v], 1))
+    _, _, present, cut_low, cut_high = raw_chords(s, t, on_border, float(s.min()))
+    return float((present & (cut_low | cut_high)).sum()) / max(int(present.sum()), 1)
 
 
 def _may_be_side_cut(mask: np.ndarray, axis: np.ndarray) -> bool:

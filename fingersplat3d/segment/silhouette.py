@@ -81,6 +81,17 @@ def principal_axis(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray
 CUT_DOMINANCE = 2.0
 """An image edge cuts the finger (:func:`finger_axis`) when it holds this many times as many of the mask's pixels as
 each edge that does not."""
+ALONG_SIDE = 0.5
+""":func:`finger_axis`: where the mask lies along two adjacent image edges, each over this share of its own extent that
+way (its pixels on the left or right edge against its rows' extent, on the top or bottom against its columns'), the
+frame cuts the finger along a side as well as across: a tight crop or a close-up the finger fills across its width,
+cut along one flank or both and at its base. The frame's cuts then say nothing of the axis (the long flank outweighs
+the base's cut, and two cut flanks read as a crop cut at both ends), and the mask keeps its principal direction:
+real dev side views cropped to 0.8 of the finger's width about the image centre had their axes taken across the
+finger, every chart vote of theirs lost (docs/measurements.md, stop 104). A fingertip entering the frame, or a crop
+cut at both ends, lies along no two adjacent edges so (no mask of IMPOSE's renders, the real dev views whole or cut
+to no tip, or the shipped samples does); a fingertip entering at a corner and lying along the second edge over half
+its depth is taken by its principal direction too."""
 
 
 OUTLINE_SWELL = 1.3
@@ -146,7 +157,8 @@ def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.nd
     one edge and that direction runs more than 45 degrees off the way from the cut's middle to the centroid (a
     fingertip entering the frame less far than it is wide): the axis is then that way. The frame's cuts are the edges
     holding :data:`CUT_DOMINANCE` times as many mask pixels as any other edge; a finger whole in the frame, or cut at
-    two adjacent edges, keeps its principal direction. ``hint``: for a mask the frame does not cut, the axis the
+    two adjacent edges (or lying along both, :data:`ALONG_SIDE`: a finger filling the frame), keeps its principal
+    direction. ``hint``: for a mask the frame does not cut, the axis the
     capture's views agree on (:func:`capture_axes`), taken instead of the principal direction. The sign is arbitrary
     (see :func:`silhouette_frame`).
     """
@@ -174,6 +186,9 @@ def _frame_axis(u: np.ndarray, v: np.ndarray, shape: tuple[int, int], axis: np.n
     that already runs within 45 degrees of the way in from a single cut)."""
     edges = _on_edges(u, v, shape)  # top, bottom, left, right: opposite ones paired
     counts = np.array([int(edge.sum()) for edge in edges])
+    along = counts >= ALONG_SIDE * (np.array([np.ptp(u), np.ptp(u), np.ptp(v), np.ptp(v)]) + 1)
+    if along[:2].any() and along[2:].any():
+        return None  # two adjacent edges cut along the mask (a finger filling the frame): its principal direction holds
 
     def cuts(chosen: list[int]) -> bool:
         others = [counts[i] for i in range(4) if i not in chosen]
