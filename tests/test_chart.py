@@ -106,3 +106,16 @@ def test_only_the_ridge_area_votes_where_most_of_the_finger_in_view_has_no_ridge
     no_tip = np.zeros((400, 2000), bool)
     no_tip[150:250, :] = True  # cut at both ends: no tip to reckon the ridges from
     assert (vote_area(no_tip) == no_tip).all()
+
+
+def test_a_chart_too_short_for_a_patch_gives_no_vote():
+    """A view whose unwrapped texture is shorter across than one patch (a thin sliver of a view, a finger the frame
+    cuts to a few rows): no patch of the other view is scored in it, and the vote says so without an error (a close-up
+    of another make 18 mm across ended in OpenCV's size assertion)."""
+    from fingersplat3d.align.correspond.chart import Unwrapped
+
+    rng = np.random.default_rng(0)
+    tall = Unwrapped(rng.random((120, 200), dtype=np.float32), np.ones((120, 200), bool), 60.0, 1.0)
+    short = Unwrapped(rng.random((12, 200), dtype=np.float32), np.ones((12, 200), bool), 6.0, 1.0)
+    assert estimate_chart_shift(tall, short, 10.0) is None
+    assert chart_shift_candidates(short, tall, 10.0, 2) == []  # and none of its own to place

@@ -105,8 +105,8 @@ def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.nd
     def vote(centre: tuple[int, int]) -> tuple[float, float, float] | None:
         y, x = centre
         left, right = max(0, x - half - max_shift), min(b.image.shape[1], x + half + max_shift)
-        if right - left < 2 * half + 1:
-            return None
+        if right - left < 2 * half + 1 or b.image.shape[0] < 2 * half:
+            return None  # b's chart too short (across or along the finger) to hold a patch
         template = a.image[y - half:y + half, x - half:x + half]
         score = cv2.matchTemplate(b.image[:, left:right], template, cv2.TM_CCOEFF_NORMED)
         score[coverage[:score.shape[0], left:left + score.shape[1]] < _VALID_TARGET] = -1.0
