@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from fingersplat3d.pointmaps.prior import finger_height
+from fingersplat3d.segment.side_cut import sides_cut_share
 from fingersplat3d.segment.silhouette import TIP_BASES, capture_axes, orient_frames, principal_axis, silhouette_frame
 
 
@@ -129,6 +130,9 @@ def test_a_finger_filling_the_frame_across_keeps_its_axis_along_it(centre, trans
     assert abs(frame.axis @ along) > 0.99
     assert frame.tip_basis == "outline" and frame.tip_side == ("top" if transpose else "left")
     assert abs(finger_height(mask).axis @ along) > 0.99  # the prior's relief runs the same way
+    assert sides_cut_share(mask, frame) > 0.5  # report.json's share of stations cut at a side: a tight crop
+    whole = capsule(rows=400, cols=600, radius=100, tip=120)  # the same finger, its flanks in view
+    assert sides_cut_share(whole, silhouette_frame(whole)) == 0.0
 
 
 def test_a_finger_whole_in_the_frame_or_cut_at_a_corner_keeps_its_longest_direction():
@@ -165,6 +169,7 @@ def test_frames_stay_finite_on_degenerate_masks():
                  np.ones((1, 40), bool), np.ones((40, 1), bool), corner):
         frame = silhouette_frame(mask)
         assert np.all(np.isfinite(frame.axis)) and np.isfinite(frame.taper) and frame.tip_side in {"top", "bottom", "left", "right"}
+        assert 0.0 <= sides_cut_share(mask, frame) <= 1.0  # what report.json says of the view's cut sides
     assert len(orient_frames([crop(top=70, bottom=70)] * 2)) == 2
 
 
