@@ -158,9 +158,9 @@ def finger_axis(mask: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.nd
     fingertip entering the frame less far than it is wide): the axis is then that way. The frame's cuts are the edges
     holding :data:`CUT_DOMINANCE` times as many mask pixels as any other edge; a finger whole in the frame, or cut at
     two adjacent edges (or lying along both, :data:`ALONG_SIDE`: a finger filling the frame), keeps its principal
-    direction. ``hint``: for a mask the frame does not cut, the axis the
-    capture's views agree on (:func:`capture_axes`), taken instead of the principal direction. The sign is arbitrary
-    (see :func:`silhouette_frame`).
+    direction. ``hint``: for a mask the frame does not cut, the axis the capture's views agree on
+    (:func:`capture_axes`), taken instead of the principal direction. The sign is arbitrary (see
+    :func:`silhouette_frame`).
     """
     mask = np.asarray(mask, bool)
     v, u = np.nonzero(mask)
