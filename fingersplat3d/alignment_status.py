@@ -192,9 +192,7 @@ def warn_without_tip(alignment: GlobalAlignment, report: dict) -> None:
     focal fitted, not where the focal probe found every turn steady whatever the focal (:data:`NO_TIP_SENSITIVITY_DEG`):
     nearly orthographic crops, whose turns the shared skin holds alone. Not with a rig (its poses are its own: no
     curvature is reported then)."""
-    tips = report.get("registration", {}).get("tip", {})
-    names = report.get("views", [])
-    placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
+    placed = _placed_tips(alignment, report)
     focal_given = alignment.focal_probe is None
     if focal_given and not _fitted_without_rig(alignment):
         return
@@ -227,9 +225,7 @@ def warn_sides_cut(alignment: GlobalAlignment, report: dict) -> None:
     dev captures cut so came out 4-33 degrees off at their worst pair (median; up to 58) with the focal fitted or
     given, four of nine with the focal given with no other warning (docs/measurements.md, stop 104). With the focal
     given too: it does not fix the section."""
-    tips = report.get("registration", {}).get("tip", {})
-    names = report.get("views", [])
-    placed = [tips.get(name) for name, aligned in zip(names, alignment.aligned) if aligned]
+    placed = _placed_tips(alignment, report)
     if not _fitted_without_rig(alignment) or len(placed) < 2 or any(tip is None for tip in placed):
         return
     if all(tip.get("sides_cut", 0.0) >= TIGHT_CROP_SHARE for tip in placed):
@@ -237,6 +233,12 @@ def warn_sides_cut(alignment: GlobalAlignment, report: dict) -> None:
                      "view shows its width there, so its section is the prior's guess and the turns rest on it "
                      "(real captures cut so: the worst pair 4-33° off at the median, up to 58°, the focal fitted or "
                      "given); photos that show the finger's whole width fix it")
+
+
+def _placed_tips(alignment: GlobalAlignment, report: dict) -> list[dict | None]:
+    """The report's ``registration.tip`` entry of each registered view (None where it has none)."""
+    tips = report.get("registration", {}).get("tip", {})
+    return [tips.get(name) for name, aligned in zip(report.get("views", []), alignment.aligned) if aligned]
 
 
 def _fitted_without_rig(alignment: GlobalAlignment) -> bool:

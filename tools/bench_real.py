@@ -124,7 +124,7 @@ def main() -> int:
         print("bench_real: --on-finger goes with --crop-sides", file=sys.stderr)
         return 2
     if args.mask_offset is not None and (args.orders or args.crop_tip is not None or args.crop_sides is not None):
-        print("bench_real: --mask-offset grows the masks of the whole captures' run only; --orders and --crop-tip find "
+        print("bench_real: --mask-offset grows the masks of the whole captures' run only; --orders and the crops find "
               "their own: run it alone", file=sys.stderr)
         return 2
     if not args.data.is_dir():

@@ -29,6 +29,12 @@ def crop_without_tip(view, share: float = CUT_SHARE):
     """``view`` cropped about its image centre along the image axis nearest the finger's, the fingertip and ``share``
     of the finger's width behind it outside the frame (:func:`tipless_window`); None when the finger is not found or
     its tip lies too near or past the centre for that."""
+    return _cropped(view, lambda mask: tipless_window(mask, share))
+
+
+def _cropped(view, window):
+    """``view`` cut to ``window(mask)`` of its finger mask (rows and columns, or None: no crop); None too when the
+    finger is not found."""
     from ..errors import InputError
     from ..scene import View
     from ..segment.masks import finger_mask
@@ -37,7 +43,7 @@ def crop_without_tip(view, share: float = CUT_SHARE):
         mask = finger_mask(view.image, name=view.name)
     except InputError:
         return None
-    keep = tipless_window(mask, share)
+    keep = window(mask)
     return None if keep is None else View(view.name, view.image[keep])
 
 
@@ -95,16 +101,8 @@ def crop_filling(view, across: float = FILL_ACROSS, past_tip: float = CUT_SHARE,
     (:func:`centred_filling_window`): a tight crop with both flanks cut and the tip in view, the principal point
     kept; ``on_finger``: about the finger's pad instead (:func:`filling_window`), as a dataset crops, the principal
     point moved with the crop. None when the finger is not found or the window does not fit in the photo."""
-    from ..errors import InputError
-    from ..scene import View
-    from ..segment.masks import finger_mask
-
-    try:
-        mask = finger_mask(view.image, name=view.name)
-    except InputError:
-        return None
-    keep = filling_window(mask, across, past_tip) if on_finger else centred_filling_window(mask, across, past_tip)
-    return None if keep is None else View(view.name, view.image[keep])
+    return _cropped(view, lambda mask: filling_window(mask, across, past_tip) if on_finger
+                    else centred_filling_window(mask, across, past_tip))
 
 
 def centred_filling_window(mask: np.ndarray, across: float = FILL_ACROSS,

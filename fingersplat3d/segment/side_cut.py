@@ -113,10 +113,16 @@ def sides_cut_share(mask: np.ndarray, frame: SilhouetteFrame) -> float:
     mask = np.asarray(mask, bool)
     if not _may_be_side_cut(mask, frame.axis):
         return 0.0
+    _, (_, _, present, cut_low, cut_high) = _frame_chords(mask, frame)
+    return float((present & (cut_low | cut_high)).sum()) / max(int(present.sum()), 1)
+
+
+def _frame_chords(mask: np.ndarray, frame: SilhouetteFrame) -> tuple[float, tuple]:
+    """``(s0, raw_chords(...))``: the view's raw chords per 1-px station along its ``frame``'s axis from ``s0``."""
     u, v, on_border = mask_pixels(mask)
     s, t = frame.coordinates(np.stack([u, v], 1))
-    _, _, present, cut_low, cut_high = raw_chords(s, t, on_border, float(s.min()))
-    return float((present & (cut_low | cut_high)).sum()) / max(int(present.sum()), 1)
+    s0 = float(s.min())
+    return s0, raw_chords(s, t, on_border, s0)
 
 
 def _may_be_side_cut(mask: np.ndarray, axis: np.ndarray) -> bool:
@@ -139,10 +145,7 @@ def _may_be_side_cut(mask: np.ndarray, axis: np.ndarray) -> bool:
 def _station_profile(mask: np.ndarray, frame: SilhouetteFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """A view's raw chords in its frame: each station's distance from the tip, half-width and whether it is whole, and
     the share of its stations the border cuts at one side only."""
-    u, v, on_border = mask_pixels(mask)
-    s, t = frame.coordinates(np.stack([u, v], 1))
-    s0 = float(s.min())
-    low, high, present, cut_low, cut_high = raw_chords(s, t, on_border, s0)
+    s0, (low, high, present, cut_low, cut_high) = _frame_chords(mask, frame)
     with np.errstate(invalid="ignore"):
         width = np.where(present, 0.5 * (high - low) + 0.5, np.nan)
     whole = present & ~cut_low & ~cut_high

@@ -95,6 +95,8 @@ def vote_area(mask: np.ndarray) -> np.ndarray:
 def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.ndarray:
     """``[K, 3]`` (row offset a-b, column offset a-b, correlation) of the patches of a that correlate."""
     rows, cols = a.image.shape
+    if b.image.shape[0] < 2 * half:
+        return np.zeros((0, 3))  # b's chart fewer rows across than one patch: nothing of it can be scored
     # Share of b's finger under a patch placed with its corner at each pixel (a patch of b that runs
     # past b's right or bottom edge is never scored, so one filter of the whole image serves all).
     coverage = cv2.boxFilter(b.valid.astype(np.float32), -1, (2 * half, 2 * half), normalize=True, anchor=(0, 0),
@@ -105,8 +107,8 @@ def _patch_votes(a: Unwrapped, b: Unwrapped, half: int, max_shift: int) -> np.nd
     def vote(centre: tuple[int, int]) -> tuple[float, float, float] | None:
         y, x = centre
         left, right = max(0, x - half - max_shift), min(b.image.shape[1], x + half + max_shift)
-        if right - left < 2 * half + 1 or b.image.shape[0] < 2 * half:
-            return None  # b's chart too short (across or along the finger) to hold a patch
+        if right - left < 2 * half + 1:
+            return None
         template = a.image[y - half:y + half, x - half:x + half]
         score = cv2.matchTemplate(b.image[:, left:right], template, cv2.TM_CCOEFF_NORMED)
         score[coverage[:score.shape[0], left:left + score.shape[1]] < _VALID_TARGET] = -1.0
