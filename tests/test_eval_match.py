@@ -138,45 +138,48 @@ def _gallery_rows(out):
     return [r for r in csv.DictReader((out / "scores.csv").open()) if r["protocol"] == "photos vs gallery"]
 
 
-def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
-    """Two shipped synthetic fingers: their front photos and the rolled prints of their true models, against their
-    true rolled prints as a contact gallery (named by finger)."""
+def _contact_gallery(tmp_path):
+    """Two shipped synthetic fingers: their front photos as probes, their true rolled prints as a contact gallery
+    (named by finger)."""
     import shutil
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1] / "data_samples"
-    probes, gallery, out = tmp_path / "probes", tmp_path / "gallery", tmp_path / "out"
+    probes, gallery = tmp_path / "probes", tmp_path / "gallery"
     probes.mkdir()
     gallery.mkdir()
     for finger, sample in (("7_1", "uwa_seed0"), ("8_1", "uwa_seed1")):
         shutil.copy(root / sample / "images" / "center.png", probes / f"{finger}_1_1_0.png")
         shutil.copy(root / sample / "rolled_print.png", gallery / f"{finger}.png")
+    return root, probes, gallery
+
+
+def _genuine_above_impostors(rows) -> list[int]:
+    genuine = [int(r["score"]) for r in rows if r["genuine"] == "1"]
+    assert min(genuine) > max(int(r["score"]) for r in rows if r["genuine"] == "0")
+    return genuine
+
+
+def test_photos_against_a_contact_gallery_either_way_round(tmp_path, capsys):
+    """The photos' prints against the gallery as it is and mirrored as inked prints are: the way round read from the
+    scores, each photo's own finger above the impostors either way."""
+    root, probes, gallery = _contact_gallery(tmp_path)
+    out = tmp_path / "out"
     status = main(["eval", "match", str(probes), "--gallery", str(gallery), "--rolled", str(root / "uwa_seed0"),
                    "-o", str(out)])
     assert status == 2 and "naming pattern" in capsys.readouterr().err  # a capture folder's photos are not UWA-named
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--gallery-naming", "(?P<who>.+)",
+                 "-o", str(tmp_path / "o2")]) == 2
     assert main(["eval", "match", str(probes), "--gallery", str(gallery), "-o", str(out)]) == 0
-    rows = list(csv.DictReader((out / "scores.csv").open()))
-    gallery_rows = [r for r in rows if r["protocol"] == "photos vs gallery"]
+    gallery_rows = _gallery_rows(out)
     assert len(gallery_rows) == 4 and sum(int(r["genuine"]) for r in gallery_rows) == 2
-    genuine = [int(r["score"]) for r in gallery_rows if r["genuine"] == "1"]
-    impostor = [int(r["score"]) for r in gallery_rows if r["genuine"] == "0"]
-    assert min(genuine) > max(impostor)  # the photos' prints match their own fingers' rolled prints
+    _genuine_above_impostors(gallery_rows)  # the photos' prints match their own fingers' rolled prints
     assert "photos vs gallery" in (out / "summary.md").read_text()
     # Against the flat-laid gallery the photos are unrolled first; compared with each other they are not.
     assert {p.name for p in (out / "prints").iterdir()} >= {"7_1_1_1_0.png", "7_1_1_1_0@unrolled.png"}
-    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--flat", "-o", str(tmp_path / "flat")]) == 0
-    assert not any("@unrolled" in p.name for p in (tmp_path / "flat" / "prints").iterdir())
-    flat = [(int(r["score"]), r["genuine"]) for r in csv.DictReader((tmp_path / "flat" / "scores.csv").open())
-            if r["protocol"] == "photos vs gallery"]
-    assert min(s for s, g in flat if g == "1") > max(s for s, g in flat if g == "0")
     # The default reads the gallery's way round from the scores: these true rolled prints keep a photo's handedness
     assert all(r["mirrored"] == "0" for r in gallery_rows)
     assert "compared as they are (the gallery's way round read from the scores" in (out / "summary.md").read_text()
-    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--mirror", "-o", str(out), "--overwrite"]) == 0
-    mirrored = _gallery_rows(out)
-    assert max(int(r["score"]) for r in mirrored if r["genuine"] == "1") < min(genuine)  # handedness matters
-    assert all(r["mirrored"] == "1" for r in mirrored)
-    assert "as --mirror or --no-mirror fixes it" in (out / "summary.md").read_text()
     # A gallery the other way round (as inked or live-scan prints are): found so, and the photos mirrored to meet it
     inked = tmp_path / "inked"
     inked.mkdir()
@@ -184,14 +187,28 @@ def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
         cv2.imwrite(str(inked / path.name), cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)[:, ::-1])
     assert main(["eval", "match", str(probes), "--gallery", str(inked), "-o", str(tmp_path / "found")]) == 0
     found = _gallery_rows(tmp_path / "found")
-    found_genuine = [int(r["score"]) for r in found if r["genuine"] == "1"]
     assert all(r["mirrored"] == "1" for r in found)
-    assert min(found_genuine) > max(int(r["score"]) for r in found if r["genuine"] == "0")
-    assert main(["eval", "match", str(probes), "--gallery", str(inked), "--no-mirror",
-                 "-o", str(tmp_path / "as_is")]) == 0
-    as_is = _gallery_rows(tmp_path / "as_is")
-    assert all(r["mirrored"] == "0" for r in as_is)
-    assert max(int(r["score"]) for r in as_is if r["genuine"] == "1") < min(found_genuine)
+    _genuine_above_impostors(found)
+
+
+@pytest.mark.slow
+def test_a_contact_gallerys_options_flat_mirror_and_scale(tmp_path):
+    """The same gallery with each option that overrides a default (5 runs of the command, ~35 s: slow): photos laid
+    flat, the gallery's way round fixed either way, and a gallery scanned coarser compared at scales about the photos'
+    ridge period or as it is."""
+    _, probes, gallery = _contact_gallery(tmp_path)
+    out = tmp_path / "out"
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--flat", "-o", str(tmp_path / "flat")]) == 0
+    assert not any("@unrolled" in p.name for p in (tmp_path / "flat" / "prints").iterdir())
+    _genuine_above_impostors(_gallery_rows(tmp_path / "flat"))
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--no-mirror", "-o", str(out)]) == 0
+    genuine = _genuine_above_impostors(_gallery_rows(out))
+    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--mirror", "-o", str(out),
+                 "--overwrite"]) == 0
+    mirrored = _gallery_rows(out)
+    assert max(int(r["score"]) for r in mirrored if r["genuine"] == "1") < min(genuine)  # handedness matters
+    assert all(r["mirrored"] == "1" for r in mirrored)
+    assert "as --mirror or --no-mirror fixes it" in (out / "summary.md").read_text()
     # Fingers whose ridges lie closer than the photos' 9 px (or a gallery scanned coarser): each gallery print is
     # compared at scales about the photos' ridge period, each pair at its best
     coarse = tmp_path / "coarse"
@@ -207,8 +224,6 @@ def test_photos_and_rolled_prints_against_a_contact_gallery(tmp_path, capsys):
         best, plain = ([int(r["score"]) for r in rows if r["genuine"] == "1" and r["probe"] == probe][0]
                        for rows in (scaled, own))
         assert best > plain
-    assert main(["eval", "match", str(probes), "--gallery", str(gallery), "--gallery-naming", "(?P<who>.+)",
-                 "-o", str(tmp_path / "o2")]) == 2
 
 
 def test_a_galleries_handedness_is_read_from_the_best_scores_alone():
