@@ -76,6 +76,7 @@ def _grab_cut(colour8: np.ndarray, labels: np.ndarray) -> np.ndarray:
 
 
 def _cut_once(colour8: np.ndarray, labels: np.ndarray, iterations: int) -> np.ndarray:
+    """``iterations`` of OpenCV's GrabCut from ``labels`` (changed in place) at their size; what it keeps as finger."""
     cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
     background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(colour8, labels, None, background_model, foreground_model, iterations, cv2.GC_INIT_WITH_MASK)
