@@ -193,7 +193,8 @@ def _in_working_pixels(config: FuseConfig, scale: WorkingScale) -> FuseConfig:
                          registration=replace(config.registration, global_align=align))
     elif config.view_focals_px is not None:  # each view's own: in working pixels, each held
         align = replace(config.registration.global_align, optimize_focal=False, shared_focal=False)
-        config = replace(config, view_focals_px=tuple(f * scale.factor for f in config.view_focals_px),
+        focals = tuple(f * scale.view_factor(v) for v, f in enumerate(config.view_focals_px))
+        config = replace(config, view_focals_px=focals,
                          registration=replace(config.registration, global_align=align))
     if scale.factor == 1.0:
         return config
@@ -209,7 +210,7 @@ def _on_photo_grid(photos: Capture, scale: WorkingScale, cameras: list[Camera], 
     outside its window: NaN, and its camera's principal point moved back to the photo's centre); ``backing``:
     :func:`~.align.transfer.multi_view_backing`'s maps, put back at their own stride (-1 outside a window)."""
     sizes = [(view.width, view.height) for view in photos.views]
-    if scale.factor == 1.0 and not scale.windowed:
+    if scale.factor == 1.0 and not scale.windowed and not scale.regrown:
         return cameras, list(maps), backing
     regions = scale.region_sizes(sizes)
     grow = [region[0] / camera.width for camera, region in zip(cameras, regions)]
@@ -262,7 +263,7 @@ def _on_splat_grid(photos: Capture, capture: Capture, scale: WorkingScale, ridge
     if boxes == scale.windows:
         if fit.factor == scale.factor:
             return capture, scale, cameras, list(maps), [1.0] * len(cameras)
-        views = (list(photos.views) if fit.factor == 1.0 and not scale.windowed
+        views = (list(photos.views) if fit.factor == 1.0 and not scale.windowed and not fit.regrown
                  else working_views(photos.views, None, fit.factor, scale.windows)[1])
         grow = [view.width / camera.width for view, camera in zip(views, cameras)]
         cameras = [camera.resized((view.width, view.height)) for camera, view in zip(cameras, views)]

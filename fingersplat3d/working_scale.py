@@ -15,6 +15,11 @@ pixels than the ridges' look); the outputs (cameras, depth maps, masks) are put 
 * ``factor = ridge_px / period`` (at most 1), one for every view of a capture (views that share a finger share
   its ridges); a factor above :data:`MIN_SHRINK` is not worth a resampling and stays 1, and no view's short side
   goes below :data:`MIN_SIDE`.
+* A photo that is another's shrunk (the same sides' ratio, fewer pixels: a camera set to a smaller size, a copy made
+  smaller to send) is taken for the largest photo's camera at that size, its field of view the same and its focal in
+  its own pixels as much smaller (:func:`resized_growth`): it is worked on grown to the largest photo's pixels, so
+  that the views share one focal in working pixels. Taken as it is, a photo at half the others' size was left out
+  (exit 3: its ridges half as wide and its focal half theirs, where the fit holds one for all).
 * A photo larger than the survey copy whose finger covers little of it (a phone's photo) is first cut to a window
   about its centre round the finger (:mod:`fingersplat3d.working_window`, ``windows=True``): the principal point
   stays at the image's centre, so the cameras are the whole photo's.
@@ -38,7 +43,8 @@ from .sampling import resized_image, resized_mask
 from .scene import View, scaled_size
 from .working_window import Window, finger_window
 
-__all__ = ["RIDGE_PX", "SPLAT_RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale", "working_views"]
+__all__ = ["RIDGE_PX", "SPLAT_RIDGE_PX", "TUNED_PX_PER_RIDGE", "SURVEY_SIDE", "MIN_SHRINK", "MIN_SIDE", "WorkingScale",
+           "resized_growth", "working_views"]
 
 RIDGE_PX = 12.0
 """Default working pixels per ridge period of the geometry (masks, pointmaps, registration, alignment). The real
@@ -69,6 +75,11 @@ MIN_SHRINK = 0.8
 """A factor above this keeps the photo's own resolution (a resampling would cost more than it saves)."""
 MIN_SIDE = 256
 """A view's short side is never scaled below this many pixels."""
+RESIZED_ASPECT = 0.01
+"""Photos whose short-to-long side ratios differ by less than this (relative) may be one camera's at two sizes."""
+RESIZED_MIN = 1.02
+"""A photo this much smaller than the largest (long side) or more is taken for it shrunk: below, the same size (a
+few pixels cut off by a converter)."""
 MASK_SIDE_MAX = 2560
 """Above the survey size and up to this long side, the working copy gets its own mask (sharper edges than the
 survey's, at ~1 s); above it, the survey's mask is resized."""
@@ -90,6 +101,21 @@ class WorkingScale:
     """Whether every view's survey copy was the photo itself (photos of at most :data:`SURVEY_SIDE` px)."""
     windows: tuple[Window | None, ...] = ()
     """Each view's working window on its photo (None, or empty: the whole photo; :mod:`fingersplat3d.working_window`)."""
+    growth: tuple[float, ...] = ()
+    """Each view's photo grown by this on top of :attr:`factor` (:func:`resized_growth`: a photo that is the largest
+    one's shrunk; empty: 1 for every view)."""
+
+    def grown(self, index: int) -> float:
+        return self.growth[index] if index < len(self.growth) else 1.0
+
+    @property
+    def regrown(self) -> bool:
+        """Whether any view's photo is grown onto the largest one's pixels."""
+        return any(g != 1.0 for g in self.growth)
+
+    def view_factor(self, index: int) -> float:
+        """View ``index``'s working pixels per photo pixel."""
+        return self.factor * self.grown(index)
 
     def window(self, index: int) -> Window | None:
         return self.windows[index] if index < len(self.windows) else None
@@ -106,7 +132,8 @@ class WorkingScale:
         """Each view's ridge period in working pixels when it was measured exactly as the later stages measure it
         (on the working images themselves: every view measured, photos kept as they are), else None."""
         periods = np.asarray(self.view_periods_px, np.float64)
-        if self.factor != 1.0 or not self.surveyed_whole or not periods.size or not np.isfinite(periods).all():
+        if (self.factor != 1.0 or self.regrown or not self.surveyed_whole or not periods.size
+                or not np.isfinite(periods).all()):
             return None
         return tuple(float(p) for p in periods)
 
@@ -117,17 +144,22 @@ class WorkingScale:
 
     def at(self, ridge_px: float | None, sizes: Sequence[tuple[int, int]]) -> "WorkingScale":
         """The same photos at another number of working pixels per ridge (None: their own resolution)."""
-        return WorkingScale(_factor(self.period_px, ridge_px, self.region_sizes(sizes)), self.period_px, ridge_px,
-                            self.view_periods_px, self.surveyed_whole, self.windows)
+        grown = [scaled_size(size, self.grown(i)) for i, size in enumerate(self.region_sizes(sizes))]
+        return WorkingScale(_factor(self.period_px, ridge_px, grown), self.period_px, ridge_px, self.view_periods_px,
+                            self.surveyed_whole, self.windows, self.growth)
 
-    def size(self, size: tuple[int, int]) -> tuple[int, int]:
-        return size if self.factor == 1.0 else scaled_size(size, self.factor)
+    def size(self, size: tuple[int, int], index: int = 0) -> tuple[int, int]:
+        """View ``index``'s working size, its photo (or window) of ``size``."""
+        factor = self.view_factor(index)
+        return size if factor == 1.0 else scaled_size(size, factor)
 
     def as_report(self, photo_sizes: Sequence[tuple[int, int]]) -> dict:
         report = {"factor": round(self.factor, 4),
                   "ridge_period_photo_px": round(self.period_px, 2) if np.isfinite(self.period_px) else None,
                   "ridge_px_asked": self.ridge_px,
-                  "sizes": [list(self.size(size)) for size in self.region_sizes(photo_sizes)]}
+                  "sizes": [list(self.size(size, i)) for i, size in enumerate(self.region_sizes(photo_sizes))]}
+        if self.regrown:  # each view's photo grown onto the largest one's pixels (1: as it is)
+            report["photos_grown"] = [round(self.grown(i), 4) for i in range(len(photo_sizes))]
         if self.windowed:  # [left, top, width, height] in photo pixels, None for a photo worked on whole
             report["windows"] = [None if self.window(i) is None else self.window(i).as_report()
                                  for i in range(len(photo_sizes))]
@@ -205,6 +237,19 @@ def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int,
     return 1.0 if factor > MIN_SHRINK else float(factor)
 
 
+def resized_growth(sizes: Sequence[tuple[int, int]]) -> tuple[float, ...]:
+    """Each photo of ``sizes`` (width, height) grown by this onto the largest one's pixels: the largest photo's long
+    side over its own where the two have one sides' ratio (:data:`RESIZED_ASPECT`; either way up) and it is at least
+    :data:`RESIZED_MIN` smaller, else 1. Empty where every photo stays as it is."""
+    if len(set(sizes)) <= 1:
+        return ()
+    largest = max(sizes, key=lambda size: size[0] * size[1])
+    ratio = min(largest) / max(largest)
+    growth = tuple(max(largest) / max(size) if abs(min(size) / max(size) / ratio - 1.0) < RESIZED_ASPECT
+                   and max(largest) / max(size) >= RESIZED_MIN else 1.0 for size in sizes)
+    return growth if any(g != 1.0 for g in growth) else ()
+
+
 def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX, factor: float | None = None,
                   windows: bool | Sequence[Window | None] = False) -> tuple[list[View], list[View], WorkingScale]:
     """``(photo views, working views, scale)``: both with finger masks (the photos' own where given).
@@ -226,34 +271,36 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX, fact
     if windows is True:
         windows = _finger_windows(surveys, sizes)
     windows = tuple(windows) if windows else ()
+    growth = resized_growth(sizes)
     period, periods = float("nan"), []  # not measured when nothing depends on it
     if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
         periods = per_item(lambda pair: _photo_period(*pair), list(zip(views, surveys)))
-        period = float(np.nanmedian(periods)) if np.isfinite(periods).any() else float("nan")
+        grown = np.asarray(periods) * np.asarray(growth or [1.0] * len(views))  # in the largest photo's pixels
+        period = float(np.nanmedian(grown)) if np.isfinite(grown).any() else float("nan")
     scale = WorkingScale(1.0, period, ridge_px, tuple(float(p) for p in periods),
-                         all(survey.factor == 1.0 for survey in surveys), windows)
-    factor = _factor(period, ridge_px, scale.region_sizes(sizes)) if factor is None else factor
+                         all(survey.factor == 1.0 for survey in surveys), windows, growth)
+    factor = scale.at(ridge_px, sizes).factor if factor is None else factor
     scale = replace(scale, factor=float(factor))
 
     def both(index: int) -> tuple[View, View]:
-        view, survey, window = views[index], surveys[index], scale.window(index)
+        view, survey, window, factor = views[index], surveys[index], scale.window(index), scale.view_factor(index)
         if window is not None:
-            return _windowed(view, survey, window, scale.factor)
-        size = scale.size((view.width, view.height))
+            return _windowed(view, survey, window, factor)
+        size = scale.size((view.width, view.height), index)
         same = size == (survey.image.shape[1], survey.image.shape[0])  # the survey copy is the working one
         image = survey.image if same else resized_image(view.image, size)
         if view.mask is not None:
             mask = resized_mask(view.mask, size)
-        elif scale.factor > survey.factor and max(size) <= MASK_SIDE_MAX:
+        elif factor > survey.factor and max(size) <= MASK_SIDE_MAX:
             from .segment.masks import finger_mask
 
             mask = finger_mask(image, name=f"view {view.name!r}")
         else:
             mask = resized_mask(survey.mask, size)
         photo_mask = view.mask if view.mask is not None else resized_mask(
-            mask if scale.factor >= survey.factor else survey.mask, (view.width, view.height))
+            mask if factor >= survey.factor else survey.mask, (view.width, view.height))
         photo = view.with_(mask=photo_mask)
-        return photo, (photo if scale.factor == 1.0 else View(view.name, image, mask))
+        return photo, (photo if factor == 1.0 else View(view.name, image, mask))
 
     pairs = per_item(both, range(len(views)))
     photo, working = [p for p, _ in pairs], [w for _, w in pairs]

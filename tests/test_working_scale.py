@@ -11,7 +11,7 @@ from fingersplat3d.pipeline import FuseConfig, fuse
 from fingersplat3d.scene import Camera, Capture, View, look_at
 from fingersplat3d.synth import SynthConfig, synthesize
 from fingersplat3d.sampling import map_on_grid, resized_image, resized_mask
-from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, SPLAT_RIDGE_PX, working_views
+from fingersplat3d.working_scale import MIN_SIDE, RIDGE_PX, SPLAT_RIDGE_PX, resized_growth, working_views
 
 
 @pytest.fixture(scope="module")
@@ -125,6 +125,36 @@ def test_fuse_of_fine_photos_answers_on_their_own_grid(uwa1280):
         error = depth_errors(depth, truth.depth, truth.mask)
         assert error.coverage > 0.95 and error.mae < 0.6
     assert max(result.report["alignment"]["focals_px"]) == pytest.approx(result.cameras[0].K[0, 0], rel=1e-6)
+
+
+def test_a_photo_that_is_anothers_shrunk_is_grown_onto_its_pixels():
+    assert resized_growth([(1280, 1024), (640, 512), (1024, 1280)]) == (1.0, 2.0, 1.0)  # either way up
+    assert resized_growth([(1280, 1024), (853, 683)]) == pytest.approx((1.0, 1280 / 853))
+    assert resized_growth([(1280, 1024)] * 3) == ()
+    assert resized_growth([(1280, 1024), (1024, 1024)]) == ()  # another sides' ratio: a crop, or another camera
+    assert resized_growth([(1280, 1024), (1270, 1016)]) == ()  # a few pixels off: the same size
+
+
+def test_a_capture_with_one_photo_at_half_the_others_size_fuses_on_each_photos_grid(uwa1280):
+    """One camera's photo shrunk to half (a smaller size set on it, a copy made to send): its focal is half the others'
+    in its own pixels, which the fit, holding one focal for all, could not take (the real capture 1_1_4_1 with its
+    side view halved: exit 3); grown onto the others' pixels, it registers (that capture's turns within 0.52 deg of
+    its whole photos', docs/measurements.md), and everything comes back on its own grid."""
+    views = [View(v.name, v.image) for v in uwa1280.views]
+    views[1] = View(views[1].name, resized_image(views[1].image, (640, 512)))
+    result = fuse(Capture(tuple(views), uwa1280.metadata), FuseConfig(splat=None))
+    working = result.report["working_resolution"]
+    assert working["photos_grown"] == [1.0, 2.0, 1.0] and working["sizes"][1] == working["sizes"][0]
+    assert result.registered
+    errors = relative_rotation_errors([c.world_to_cam for c in result.cameras],
+                                      [v.camera.world_to_cam for v in uwa1280.views])
+    assert max(errors) < 2  # measured 0.17-0.34 deg over three seeds (none registered before); a broken alignment: tens
+    assert result.cameras[1].size == (640, 512) and result.depths[1].shape == (512, 640)
+    assert result.capture.views[1].mask.shape == (512, 640)
+    assert result.cameras[1].K[0, 0] == pytest.approx(0.5 * result.cameras[0].K[0, 0], rel=1e-3)
+    assert result.cameras[0].K[0, 0] == pytest.approx(uwa1280.views[0].camera.K[0, 0], rel=0.1)
+    focals = result.report["alignment"]["focals_px"]
+    assert focals[1] == pytest.approx(0.5 * focals[0], rel=1e-3)
 
 
 def test_the_measured_period_is_handed_on_only_when_it_is_the_registrations_own(uwa640, uwa1280):
