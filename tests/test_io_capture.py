@@ -236,6 +236,27 @@ def test_a_phone_photo_is_read_upright(tmp_path):
     assert upright[:, :, 0].mean(axis=1)[-1] > upright[:, :, 0].mean(axis=1)[0] + 0.5  # red now grows downward
 
 
+def test_other_formats_and_colour_modes_read_as_the_same_picture(tmp_path):
+    """CMYK JPEG, palette, RGBA and 16-bit PNG, TIFF, WebP and BMP (what other tools and cameras write) come back as
+    the picture they hold: a capture in each fused whole (docs/measurements.md, stop 106)."""
+    from PIL import Image
+
+    rng = np.random.default_rng(3)
+    gray = cv2.GaussianBlur(rng.integers(0, 256, (H, W), dtype=np.uint8), (0, 0), 2.0)  # smooth: JPEG keeps it
+    picture = Image.fromarray(np.repeat(gray[..., None], 3, axis=2))
+    writes = {"cmyk.jpg": lambda p: picture.convert("CMYK").save(p, quality=100),
+              "palette.png": lambda p: picture.quantize(256).save(p),
+              "rgba.png": lambda p: picture.convert("RGBA").save(p),
+              "gray16.png": lambda p: cv2.imwrite(str(p), gray.astype(np.uint16) * 257),
+              "plain.tif": lambda p: picture.save(p), "plain.webp": lambda p: picture.save(p, lossless=True),
+              "plain.bmp": lambda p: picture.save(p)}
+    for name, write in writes.items():
+        write(tmp_path / name)
+        image = read_image(tmp_path / name, gray=True)
+        assert image.shape == (H, W) and image.dtype == np.float32, name
+        assert np.abs(image * 255 - gray).max() < (6 if name.endswith("jpg") else 1.01), name
+
+
 def test_an_output_path_that_is_a_file_is_named_so(tmp_path):
     (tmp_path / "out").write_text("mine")
     with pytest.raises(FileExistsError, match=r"already exists \(a file\); use --overwrite"):
