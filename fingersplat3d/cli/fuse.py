@@ -59,8 +59,9 @@ def add(commands) -> None:
                       help="global alignment solver: lm (Levenberg-Marquardt, default) or lbfgs (slower to converge; "
                            "measured in docs/measurements.md)")
     fuse.add_argument("--focal-px", type=POSITIVE,
-                      help="the cameras' focal length in the photos' pixels, when known: kept instead of fitted (two "
-                           "views cannot fix it, and their turn follows it; see docs/measurements.md)")
+                      help="the cameras' focal length in the photos' pixels (the largest photo's, where one is "
+                           "another's shrunk), when known: kept instead of fitted (two views cannot fix it, and their "
+                           "turn follows it; see docs/measurements.md)")
     fuse.add_argument("--no-exif-focal", dest="exif_focal", action="store_false",
                       help="fit the focal even when the photos' EXIF records one (by default a focal every photo's EXIF "
                            "agrees on is kept, as --focal-px, and photos of other zooms keep each its own; report.json "
