@@ -43,6 +43,33 @@ def test_a_folder_without_images_or_captures_is_refused_at_listing(tmp_path):
         list_jobs([empty])
 
 
+def test_a_folder_of_photo_folders_is_one_capture_each(tmp_path, capsys):
+    """One folder per capture, each with its photos (no dataset naming): a job each, named after it; photos of the
+    folder's own make it one capture, as before; a fuse pointed at the folder above names the folders that hold
+    photos."""
+    from fingersplat3d.cli import main
+
+    root = tmp_path / "mine"
+    image = np.full((8, 10), 0.5, np.float32)
+    for capture in ("finger 10", "finger 2"):
+        for view in ("left", "front", "right"):
+            write_image(root / capture / f"{view}.png", image)
+    (root / ".hidden").mkdir()
+    write_image(root / ".hidden" / "x.png", image)
+    (root / "notes").mkdir()
+    (root / "notes" / "readme.txt").write_text("no photos")
+    jobs = list_jobs([root])
+    assert [job.name for job in jobs] == ["finger 2", "finger 10"] and all(len(load_job(job)) == 3 for job in jobs)
+    write_image(root / "extra.png", image)  # a photo of its own: the folder is one capture of its photos
+    assert [job.name for job in list_jobs([root])] == ["mine"]
+    (root / "extra.png").unlink()
+    capsys.readouterr()
+    assert main(["fuse", str(root), "-o", str(tmp_path / "out"), "--no-splat"]) == 2
+    said = capsys.readouterr().err
+    assert "holds no images" in said and "'finger 10', 'finger 2' hold photos" in said and "fs3d batch" in said
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("text", ["count=0", "colour=red", "subject", "count=x"])
 def test_bad_select_is_one_sentence(text):
     with pytest.raises(InputError, match="--select"):

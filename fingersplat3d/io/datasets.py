@@ -29,7 +29,8 @@ from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
 from .exif import exif_focal
-from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_images, read_mask, unread_photos, unread_photos_note
+from .images import (IMAGE_SUFFIXES, UNREAD_SUFFIXES, inner_photos_note, read_images, read_mask, unread_photos,
+                     unread_photos_note)
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
            "load_cfpose", "load_image_folder", "load_any", "natural_key"]
@@ -325,7 +326,8 @@ def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = No
             files, _ = _image_files(path, recursive=False)
             files = [file for file in files if not file.stem.endswith(_MASK_SUFFIX)]
             if not files:
-                raise input_error(path, "holds no images and is not a capture folder" + unread_photos_note(path))
+                raise input_error(path, "holds no images and is not a capture folder" + unread_photos_note(path)
+                                  + inner_photos_note(path))
         else:
             files = [path]
     else:

@@ -7,6 +7,8 @@ travel by path, and each worker loads its own capture (:func:`load_job`). Layout
   frames 0-2; a capture missing one of them is listed with the reason, so the run records it;
 * a CFPose folder (``{finger}_{pose}.bmp``): one job per finger, every pose;
 * a folder of capture folders (each with ``manifest.json`` or ``images/``): one job per folder;
+* a folder of photo folders (no photos of its own, each folder inside with photos of its own, as a user lays out
+  one folder per capture): one job per such folder;
 * a CSV file with a header ``name,paths`` (paths separated by ``;``, relative to the CSV): one
   job per row;
 * a single capture folder, image folder or list of image files: one job.
@@ -130,7 +132,11 @@ def list_jobs(paths: Sequence[str | Path], select: str | None = None) -> list[Ca
                 jobs = [CaptureJob(f"finger_{finger}", tuple(str(fingers[finger][pose]) for pose in sorted(fingers[finger])),
                                    {"finger": finger}) for finger in sorted(fingers, key=natural_key)]
             else:
-                jobs = [CaptureJob(folder.name, (str(folder),))]
+                own, _ = _image_files(folder, recursive=False)
+                inner = [] if own else sorted((p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")
+                                               and _image_files(p, recursive=False)[0]),
+                                              key=lambda p: natural_key(p.name))
+                jobs = [CaptureJob(p.name, (str(p),)) for p in inner] or [CaptureJob(folder.name, (str(folder),))]
     else:
         files = [item for item in items if item.is_file()]
         jobs = _uwa_jobs(files) if files and len(files) == len(items) and _kind_of(files) == "uwa" else \
