@@ -264,13 +264,13 @@ def _on_splat_grid(photos: Capture, capture: Capture, scale: WorkingScale, ridge
         if fit.factor == scale.factor:
             return capture, scale, cameras, list(maps), [1.0] * len(cameras)
         views = (list(photos.views) if fit.factor == 1.0 and not scale.windowed and not fit.regrown
-                 else working_views(photos.views, None, fit.factor, scale.windows)[1])
+                 else working_views(photos.views, None, fit.factor, scale.windows, scale.growth)[1])
         grow = [view.width / camera.width for view, camera in zip(views, cameras)]
         cameras = [camera.resized((view.width, view.height)) for camera, view in zip(cameras, views)]
         maps = [[map_on_grid(values, (view.width, view.height), view.mask) for values, view in zip(per_view, views)]
                 for per_view in maps]
     else:  # through the photo's grid, from the geometry's windows to the fit's
-        views = working_views(photos.views, None, fit.factor, boxes)[1]
+        views = working_views(photos.views, None, fit.factor, boxes, scale.growth)[1]
         regions, fitted = scale.region_sizes(sizes), fit.region_sizes(sizes)
         grow = [view.width / box[0] * region[0] / camera.width
                 for view, box, region, camera in zip(views, fitted, regions, cameras)]

@@ -15,11 +15,12 @@ pixels than the ridges' look); the outputs (cameras, depth maps, masks) are put 
 * ``factor = ridge_px / period`` (at most 1), one for every view of a capture (views that share a finger share
   its ridges); a factor above :data:`MIN_SHRINK` is not worth a resampling and stays 1, and no view's short side
   goes below :data:`MIN_SIDE`.
-* A photo that is another's shrunk (the same sides' ratio, fewer pixels: a camera set to a smaller size, a copy made
-  smaller to send) is taken for the largest photo's camera at that size, its field of view the same and its focal in
-  its own pixels as much smaller (:func:`resized_growth`): it is worked on grown to the largest photo's pixels, so
-  that the views share one focal in working pixels. Taken as it is, a photo at half the others' size was left out
-  (exit 3: its ridges half as wide and its focal half theirs, where the fit holds one for all).
+* A photo that is another's shrunk (the same sides' ratio, fewer pixels, and its ridges as much narrower: a camera set
+  to a smaller size, a copy made smaller to send) is taken for the largest photo's camera at that size, its field of
+  view the same and its focal in its own pixels as much smaller (:func:`resized_growth`): it is worked on grown to the
+  largest photo's pixels, so that the views share one focal in working pixels. Taken as it is, a photo at half the
+  others' size was left out (exit 3: its ridges half as wide and its focal half theirs, where the fit holds one for
+  all). A photo cut about its centre at the same ratio keeps the others' ridges and focal, and is taken as it is.
 * A photo larger than the survey copy whose finger covers little of it (a phone's photo) is first cut to a window
   about its centre round the finger (:mod:`fingersplat3d.working_window`, ``windows=True``): the principal point
   stays at the image's centre, so the cameras are the whole photo's.
@@ -237,27 +238,47 @@ def _factor(period_px: float, ridge_px: float | None, sizes: Sequence[tuple[int,
     return 1.0 if factor > MIN_SHRINK else float(factor)
 
 
-def resized_growth(sizes: Sequence[tuple[int, int]]) -> tuple[float, ...]:
+def resized_growth(sizes: Sequence[tuple[int, int]], periods: Sequence[float] | None = None) -> tuple[float, ...]:
     """Each photo of ``sizes`` (width, height) grown by this onto the largest one's pixels: the largest photo's long
     side over its own where the two have one sides' ratio (:data:`RESIZED_ASPECT`; either way up) and it is at least
-    :data:`RESIZED_MIN` smaller, else 1. Empty where every photo stays as it is."""
+    :data:`RESIZED_MIN` smaller, else 1. Empty where every photo stays as it is.
+
+    ``periods``: each photo's ridge period in its own pixels (NaN: not measured). A photo cut from a larger one about
+    its centre at the same sides' ratio (a crop, its focal in pixels the larger one's) has that size too, but its ridges
+    as wide as the others': a smaller photo is taken for shrunk only where its ridges are nearer the others' shrunk by
+    its size than the others' as they are (in ratio), and its ridges and theirs were measured. Grown by its size, a
+    real side view cut to 0.75 about its centre had turned 2.2-3.3 degrees off (docs/measurements.md, stop 106)."""
     if len(set(sizes)) <= 1:
         return ()
     largest = max(sizes, key=lambda size: size[0] * size[1])
     ratio = min(largest) / max(largest)
-    growth = tuple(max(largest) / max(size) if abs(min(size) / max(size) / ratio - 1.0) < RESIZED_ASPECT
-                   and max(largest) / max(size) >= RESIZED_MIN else 1.0 for size in sizes)
-    return growth if any(g != 1.0 for g in growth) else ()
+    growth = [max(largest) / max(size) if abs(min(size) / max(size) / ratio - 1.0) < RESIZED_ASPECT
+              and max(largest) / max(size) >= RESIZED_MIN else 1.0 for size in sizes]
+    if periods is not None:
+        periods = np.asarray(periods, np.float64)
+        whole = [p for p, g in zip(periods, growth) if g == 1.0 and np.isfinite(p) and p > 0]
+        for v, (g, period) in enumerate(zip(growth, periods)):
+            if g == 1.0:
+                continue
+            if not whole or not (np.isfinite(period) and period > 0):
+                growth[v] = 1.0  # nothing to tell a shrunk photo from a cut one by: taken as it is, as before
+                continue
+            seen = float(np.median(whole)) / period  # how much wider the others' ridges are than this photo's
+            growth[v] = g if abs(np.log(seen / g)) < abs(np.log(seen)) else 1.0
+    return tuple(growth) if any(g != 1.0 for g in growth) else ()
 
 
 def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX, factor: float | None = None,
-                  windows: bool | Sequence[Window | None] = False) -> tuple[list[View], list[View], WorkingScale]:
+                  windows: bool | Sequence[Window | None] = False, growth: tuple[float, ...] | None = None
+                  ) -> tuple[list[View], list[View], WorkingScale]:
     """``(photo views, working views, scale)``: both with finger masks (the photos' own where given).
 
     ``ridge_px``: working pixels per ridge period (None: the photos' own resolution); ``factor``: a scale to use
     instead of measuring one (a rig calibration scales all its captures alike); ``windows``: True cuts each photo
     larger than :data:`SURVEY_SIDE` to its finger's window where that keeps little of it
-    (:func:`~fingersplat3d.working_window.finger_window`), or each view's window to use (None: the whole photo).
+    (:func:`~fingersplat3d.working_window.finger_window`), or each view's window to use (None: the whole photo);
+    ``growth``: each photo's growth onto the largest one's pixels to use instead of finding it (:func:`resized_growth`:
+    the splat fit's grid takes the geometry's).
     """
     if ridge_px is not None and not (np.isfinite(ridge_px) and ridge_px > 0):
         raise InputError(f"pixels per ridge must be a positive number, got {ridge_px}")
@@ -271,10 +292,11 @@ def working_views(views: Sequence[View], ridge_px: float | None = RIDGE_PX, fact
     if windows is True:
         windows = _finger_windows(surveys, sizes)
     windows = tuple(windows) if windows else ()
-    growth = resized_growth(sizes)
     period, periods = float("nan"), []  # not measured when nothing depends on it
-    if ridge_px is not None:  # views without ridges to measure do not vote; none at all: the photos as they are
+    if ridge_px is not None or (growth is None and resized_growth(sizes)):  # views without ridges do not vote
         periods = per_item(lambda pair: _photo_period(*pair), list(zip(views, surveys)))
+    growth = resized_growth(sizes, periods) if growth is None else tuple(growth)
+    if ridge_px is not None:  # none measured at all: the photos as they are
         grown = np.asarray(periods) * np.asarray(growth or [1.0] * len(views))  # in the largest photo's pixels
         period = float(np.nanmedian(grown)) if np.isfinite(grown).any() else float("nan")
     scale = WorkingScale(1.0, period, ridge_px, tuple(float(p) for p in periods),

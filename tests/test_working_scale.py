@@ -133,6 +133,23 @@ def test_a_photo_that_is_anothers_shrunk_is_grown_onto_its_pixels():
     assert resized_growth([(1280, 1024)] * 3) == ()
     assert resized_growth([(1280, 1024), (1024, 1024)]) == ()  # another sides' ratio: a crop, or another camera
     assert resized_growth([(1280, 1024), (1270, 1016)]) == ()  # a few pixels off: the same size
+    # with the ridges measured: shrunk where its ridges are as much narrower, else cut from a larger photo
+    assert resized_growth([(1280, 1024), (640, 512), (1280, 1024)], [14.0, 7.3, 15.0]) == (1.0, 2.0, 1.0)
+    assert resized_growth([(1280, 1024), (640, 512), (1280, 1024)], [14.0, 13.1, 15.0]) == ()
+    assert resized_growth([(1280, 1024), (640, 512)], [14.0, float("nan")]) == ()  # nothing to tell them apart by
+
+
+def test_a_photo_cut_about_its_centre_is_not_taken_for_one_shrunk(uwa1280):
+    """A photo cut from a larger one at its sides' ratio keeps its ridges as wide as the others' (and its focal in
+    pixels): worked on as it is, where the same photo shrunk to that size is grown."""
+    views = [View(v.name, v.image) for v in uwa1280.views]
+    cut = views[1].image[128:896, 160:1120]  # 960 x 768 about the centre
+    shrunk = resized_image(views[1].image, (960, 768))
+    _, working, scale = working_views([views[0], View("cut", cut), views[2]])
+    assert scale.growth == () and (working[1].width, working[1].height) == scale.size((960, 768), 1)
+    _, working, scale = working_views([views[0], View("shrunk", shrunk), views[2]])
+    assert scale.growth == pytest.approx((1.0, 1280 / 960, 1.0))
+    assert (working[1].width, working[1].height) == (working[0].width, working[0].height)
 
 
 def test_a_capture_with_one_photo_at_half_the_others_size_fuses_on_each_photos_grid(uwa1280):
