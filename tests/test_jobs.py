@@ -66,7 +66,7 @@ def test_a_folder_of_photo_folders_is_one_capture_each(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fuse", str(root), "-o", str(tmp_path / "out"), "--no-splat"]) == 2
     said = capsys.readouterr().err
-    assert "holds no images" in said and "'finger 10', 'finger 2' hold photos" in said and "fs3d batch" in said
+    assert "holds no images" in said and "folders 'finger 10', 'finger 2' hold photos" in said and "fs3d batch" in said
     assert not (tmp_path / "out").exists()
 
 

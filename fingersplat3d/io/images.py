@@ -48,10 +48,17 @@ def unread_photos_note(folder: Path) -> str:
 def inner_photos_note(folder: Path, shown: int = 3) -> str:
     """``"; its folders 'a', 'b' hold photos: ..."`` when folders directly inside ``folder`` hold photos (a user
     pointing at the folder above a capture's), else ``""``: the end of a "holds no images" sentence."""
-    if not Path(folder).is_dir():
+    def photos_in(inner: Path) -> bool:
+        try:
+            return inner.is_dir() and not inner.name.startswith(".") and any(
+                p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in inner.iterdir())
+        except OSError:  # a folder that cannot be read: not one to name
+            return False
+
+    try:
+        held = sorted(inner.name for inner in Path(folder).iterdir() if photos_in(inner))
+    except OSError:
         return ""
-    held = sorted(inner.name for inner in Path(folder).iterdir() if inner.is_dir() and any(
-        p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in inner.iterdir()))
     if not held:
         return ""
     names = ", ".join(repr(name) for name in held[:shown])
