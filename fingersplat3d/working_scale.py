@@ -149,7 +149,7 @@ class WorkingScale:
         return WorkingScale(_factor(self.period_px, ridge_px, grown), self.period_px, ridge_px, self.view_periods_px,
                             self.surveyed_whole, self.windows, self.growth)
 
-    def size(self, size: tuple[int, int], index: int = 0) -> tuple[int, int]:
+    def size(self, size: tuple[int, int], index: int) -> tuple[int, int]:
         """View ``index``'s working size, its photo (or window) of ``size``."""
         factor = self.view_factor(index)
         return size if factor == 1.0 else scaled_size(size, factor)

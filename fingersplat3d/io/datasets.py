@@ -29,11 +29,10 @@ from ..errors import input_error
 from ..scene import Capture, View
 from .capture import is_capture_folder, read_capture
 from .exif import exif_focal
-from .images import (IMAGE_SUFFIXES, UNREAD_SUFFIXES, inner_photos_note, read_images, read_mask, unread_photos,
-                     unread_photos_note)
+from .images import IMAGE_SUFFIXES, UNREAD_SUFFIXES, read_images, read_mask, unread_photos, unread_photos_note
 
 __all__ = ["UWA_VIEW_FRAMES", "UWA_STRUCTURED_FRAMES", "UWAGroup", "find_uwa_groups", "load_uwa",
-           "load_cfpose", "load_image_folder", "load_any", "natural_key"]
+           "load_cfpose", "load_image_folder", "load_any", "natural_key", "photo_folders"]
 
 UWA_VIEW_FRAMES = (0, 1, 2)
 UWA_STRUCTURED_FRAMES = (3, 4, 5)
@@ -55,6 +54,34 @@ def _same_id(wanted: object, found: str) -> bool:
         return True
     wanted = str(wanted)
     return wanted == found or (wanted.isdigit() and found.isdigit() and int(wanted) == int(found))
+
+
+def photo_folders(folder: str | Path) -> list[Path]:
+    """The folders directly inside ``folder`` that hold photos of their own (hidden and unreadable ones left out), in
+    natural order: a user's one folder per capture, each a capture of ``fs3d batch``'s (:mod:`.jobs`)."""
+    def holds_photos(inner: Path) -> bool:
+        try:
+            return inner.is_dir() and not inner.name.startswith(".") and bool(_image_files(inner, recursive=False)[0])
+        except OSError:  # a folder that cannot be read: not one to name
+            return False
+
+    try:
+        held = [inner for inner in Path(folder).iterdir() if holds_photos(inner)]
+    except OSError:
+        return []
+    return sorted(held, key=lambda p: natural_key(p.name))
+
+
+def _inner_photos_note(folder: Path, shown: int = 3) -> str:
+    """``"; its folders 'a', 'b' hold photos: ..."`` when :func:`photo_folders` finds some in ``folder`` (a user
+    pointing at the folder above a capture's), else ``""``: the end of a "holds no images" sentence."""
+    held = sorted(inner.name for inner in photo_folders(folder))
+    if not held:
+        return ""
+    names = ", ".join(repr(name) for name in held[:shown])
+    names += f" and {len(held) - shown} more" if len(held) > shown else ""
+    return (f"; its folder{'s' if len(held) > 1 else ''} {names} hold{'' if len(held) > 1 else 's'} photos: give one "
+            "to fuse it, or the folder to `fs3d batch` to fuse each")
 
 
 def _image_files(folder_or_files: str | Path | Iterable[str | Path], recursive: bool) -> tuple[list[Path], Path]:
@@ -327,7 +354,7 @@ def load_any(paths: str | Path | Iterable[str | Path], *, gray: bool | None = No
             files = [file for file in files if not file.stem.endswith(_MASK_SUFFIX)]
             if not files:
                 raise input_error(path, "holds no images and is not a capture folder" + unread_photos_note(path)
-                                  + inner_photos_note(path))
+                                  + _inner_photos_note(path))
         else:
             files = [path]
     else:

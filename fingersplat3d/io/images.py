@@ -45,28 +45,6 @@ def unread_photos_note(folder: Path) -> str:
     return f"; its {unread_photos(kinds)}" if kinds else ""
 
 
-def inner_photos_note(folder: Path, shown: int = 3) -> str:
-    """``"; its folders 'a', 'b' hold photos: ..."`` when folders directly inside ``folder`` hold photos (a user
-    pointing at the folder above a capture's), else ``""``: the end of a "holds no images" sentence."""
-    def photos_in(inner: Path) -> bool:
-        try:
-            return inner.is_dir() and not inner.name.startswith(".") and any(
-                p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in inner.iterdir())
-        except OSError:  # a folder that cannot be read: not one to name
-            return False
-
-    try:
-        held = sorted(inner.name for inner in Path(folder).iterdir() if photos_in(inner))
-    except OSError:
-        return ""
-    if not held:
-        return ""
-    names = ", ".join(repr(name) for name in held[:shown])
-    names += f" and {len(held) - shown} more" if len(held) > shown else ""
-    return (f"; its folder{'s' if len(held) > 1 else ''} {names} hold{'' if len(held) > 1 else 's'} photos: give one "
-            "to fuse it, or the folder to `fs3d batch` to fuse each")
-
-
 def find_files(paths: list[Path], suffixes: tuple[str, ...] = IMAGE_SUFFIXES) -> list[Path]:
     """Files with one of ``suffixes`` (case-insensitive): those given, and those under given folders
     (recursively, sorted). A path that does not exist is an ``InputError``."""

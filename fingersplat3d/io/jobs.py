@@ -27,7 +27,8 @@ from typing import Sequence
 from ..errors import InputError, input_error
 from ..scene import Capture
 from .capture import is_capture_folder
-from .datasets import UWA_VIEW_FRAMES, _cfpose_fingers, _image_files, _kind_of, find_uwa_groups, load_any, natural_key
+from .datasets import (UWA_VIEW_FRAMES, _cfpose_fingers, _image_files, _kind_of, find_uwa_groups, load_any,
+                       natural_key, photo_folders)
 from .images import unread_photos_note
 
 __all__ = ["CaptureJob", "list_jobs", "load_job", "parse_select"]
@@ -132,10 +133,7 @@ def list_jobs(paths: Sequence[str | Path], select: str | None = None) -> list[Ca
                 jobs = [CaptureJob(f"finger_{finger}", tuple(str(fingers[finger][pose]) for pose in sorted(fingers[finger])),
                                    {"finger": finger}) for finger in sorted(fingers, key=natural_key)]
             else:
-                own, _ = _image_files(folder, recursive=False)
-                inner = [] if own else sorted((p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")
-                                               and _image_files(p, recursive=False)[0]),
-                                              key=lambda p: natural_key(p.name))
+                inner = [] if _image_files(folder, recursive=False)[0] else photo_folders(folder)
                 jobs = [CaptureJob(p.name, (str(p),)) for p in inner] or [CaptureJob(folder.name, (str(folder),))]
     else:
         files = [item for item in items if item.is_file()]

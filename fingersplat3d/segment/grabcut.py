@@ -71,7 +71,7 @@ def _grab_cut(colour8: np.ndarray, labels: np.ndarray) -> np.ndarray:
     start[given] = labels[given]
     labels[:] = start
     if not _both_sides(labels):  # the coarse cut kept all or nothing, and no seed says otherwise: its answer stands
-        return (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+        return _kept(labels)
     return _cut_once(colour8, labels, REFINE_ITERATIONS)
 
 
@@ -80,6 +80,11 @@ def _cut_once(colour8: np.ndarray, labels: np.ndarray, iterations: int) -> np.nd
     cv2.setRNGSeed(0)  # GrabCut's mixture models start from k-means: the same photo gives the same mask
     background_model, foreground_model = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(colour8, labels, None, background_model, foreground_model, iterations, cv2.GC_INIT_WITH_MASK)
+    return _kept(labels)
+
+
+def _kept(labels: np.ndarray) -> np.ndarray:
+    """What ``labels`` hold as finger, sure or probable."""
     return (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
 
 
@@ -95,5 +100,5 @@ def _coarse_labels(labels: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 def _both_sides(labels: np.ndarray) -> bool:
     """Whether ``labels`` give GrabCut samples of both the finger and the background (it fails on either empty)."""
-    finger = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
+    finger = _kept(labels)
     return bool(finger.any()) and not bool(finger.all())
