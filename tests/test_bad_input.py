@@ -1,5 +1,6 @@
 """Bad input fails with one InputError naming the file; failed writes leave nothing behind."""
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -383,6 +384,24 @@ def test_views_that_cannot_be_registered_exit_3_with_outputs_written(two_fingers
     report = json.loads((out / "report.json").read_text())
     assert report["alignment"]["ok"] is False and report["alignment"]["not_registered"] == ["other"]
     assert (out / "fused.ply").is_file() and (out / "cameras.json").is_file()
+
+
+def test_photos_too_small_for_their_ridges_say_so_and_print_no_residual(tmp_path, capsys):
+    """Three photos of a finger shrunk to 64x51 px: no ridges to register by. The summary line had read "alignment
+    residual nan px"."""
+    from fingersplat3d.cli import main
+    from fingersplat3d.errors import EXIT_NOT_REGISTERED
+
+    images = Path(__file__).resolve().parents[1] / "data_samples" / "uwa_seed0" / "images"
+    small = tmp_path / "small"
+    small.mkdir()
+    for path in sorted(images.glob("*.png")):
+        photo = cv2.imread(str(path))
+        cv2.imwrite(str(small / path.name), cv2.resize(photo, (64, 51), interpolation=cv2.INTER_AREA))
+    assert main(["fuse", str(small), "-o", str(tmp_path / "rec"), "--no-splat"]) == EXIT_NOT_REGISTERED
+    captured = capsys.readouterr()
+    assert "nan" not in captured.out and "no two views aligned" in captured.out
+    assert "no ridges found" in captured.err and "Traceback" not in captured.err
 
 
 def test_one_view_says_there_is_nothing_to_align(two_fingers, tmp_path, capsys):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -102,8 +103,10 @@ def run(args: argparse.Namespace) -> int:
     result = fuse(captures[0], config, progress=True, rig=rig)
     write_reconstruction(result, args.output, overwrite=args.overwrite)
     alignment = result.report["alignment"]
+    value = alignment["residual_px"]
     residual = "one view: nothing to align" if len(result.capture) == 1 else (
-        "identical images: monocular mode" if alignment["mode"] == "monocular" else f"alignment residual {alignment['residual_px']:.2f} px")
+        "identical images: monocular mode" if alignment["mode"] == "monocular" else
+        f"alignment residual {value:.2f} px" if value is not None and math.isfinite(value) else "no two views aligned")
     print(f"wrote {args.output}: {len(result.capture)} views, {result.report['points']} points, units {result.units}, "
           f"{residual}, {time.perf_counter() - start:.1f} s")
     exif = result.report.get("exif_focal", {})

@@ -541,20 +541,29 @@ def _same_hue(extra: np.ndarray, kept: np.ndarray, colour: np.ndarray) -> bool:
 
 
 def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None],
-            repeated: np.ndarray) -> np.ndarray | None:
+            repeated: np.ndarray, work: _Work) -> np.ndarray | None:
     """Of the mask cut from the plain ridge score and the one cut from the score that asks the ridges to repeat
     (``cut_again()``, None where it finds no finger; ``repeated``, :func:`ridge_score`), the plain one, unless the
     other holds :data:`REPEATED_MORE` times its repeating ridges (the plain one found something else: a thing whose
-    edges and lines read as ridges, or a finger whose ridges are too fine for the working copy) or the plain one swells
+    edges and lines read as ridges, or a finger whose ridges are too fine for the working copy), or the plain one swells
     past the finger by :data:`SWELL_MARGIN` more than the other
-    (:func:`~fingersplat3d.segment.silhouette.outline_swell`: something of the skin's colour joined to it). Either
-    where the other is None. The second cut is made only where it could be taken: not where the plain one holds that
-    share of the image's repeating ridges already and swells within the margin (no mask's swell is under 1)."""
+    (:func:`~fingersplat3d.segment.silhouette.outline_swell`: something of the skin's colour joined to it), or the
+    plain one's outline lies on no edge of the photo (:func:`_on_no_edge`) and the other's on edges :data:`EDGE_GAIN`
+    times stronger (:func:`_edge_support`). A desk of the skin's own grey, or one lit unevenly (a lamp beside it, so
+    that its greys span the finger's), leaves GrabCut's colour models little to part them by, and the plain score's
+    ridge evidence, reaching past the rims, held a band of desk all round the finger; the repeating ridges do not
+    reach past them. Measured on the real grey views (docs/measurements.md, stop 107): on a lamp-lit desk IoU 0.93
+    (0.89) finger 1, 0.95 (one view lost) finger 2 held out, now 0.995 (0.988) and 0.990 (0.954); on a plain desk of
+    the skin's grey 0.88-0.89, now 0.995-0.999. Either where the other is None. The second cut is made only where it
+    could be taken: not where the plain one holds that share of the image's repeating ridges already, swells within
+    the margin (no mask's swell is under 1) and lies on the photo's edges."""
     if plain is None:
         return cut_again()
     ridged = repeated > RIDGE_LEVEL
     held, swell = np.count_nonzero(ridged & plain), outline_swell(plain)
-    if REPEATED_MORE * held >= np.count_nonzero(ridged) and (swell is None or swell <= SWELL_MARGIN):
+    no_edge = _on_no_edge(plain, work)
+    if (REPEATED_MORE * held >= np.count_nonzero(ridged) and (swell is None or swell <= SWELL_MARGIN)
+            and not no_edge):
         return plain
     again = cut_again()
     if again is None:
@@ -562,7 +571,13 @@ def _chosen(plain: np.ndarray | None, cut_again: Callable[[], np.ndarray | None]
     if np.count_nonzero(ridged & again) > REPEATED_MORE * held:
         return again
     again_swell = outline_swell(again)
-    return again if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell else plain
+    if swell is not None and again_swell is not None and swell > SWELL_MARGIN * again_swell:
+        return again
+    if no_edge:
+        ours, theirs = _edge_support(plain, work), _edge_support(again, work)
+        if ours is not None and theirs is not None and theirs >= EDGE_GAIN * ours:
+            return again
+    return plain
 
 
 def _framed_cut(work: _Work, evidence: tuple[np.ndarray, np.ndarray], reach: float,
@@ -646,7 +661,7 @@ def finger_mask_any_background(image: np.ndarray, *, name: str = "image") -> np.
         plain, problem = _framed_cut(work, plain_evidence, RIDGE_REACH_SHARE), None
     except InputError as error:
         plain, problem = None, error
-    finger = _chosen(plain, cut_again, repeated[0])
+    finger = _chosen(plain, cut_again, repeated[0], work)
     if finger is None:  # a finger the frame cuts at both ends fills much of the ring GrabCut took as background
         finger = _crossing_cut(work, plain_evidence)
     elif _on_no_edge(finger, work):  # ... or left out where a patch of the background's own texture was taken for it
