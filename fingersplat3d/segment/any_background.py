@@ -30,8 +30,8 @@ one period and a slowly turning orientation. So:
    where it holds half as many repeating ridges again as the first, or where the first swells past the finger a tenth
    more than it (:func:`_chosen`): the first had found a thing of the clutter, or taken one in; or where the first's
    outline lies on no edge of the photo and its own on edges twice as strong (a band of a desk of the skin's greys
-   kept all round the finger). A real finger's skin,
-   its ridges among pores and noise, repeats little at the working size, so the first cut stays wherever both agree;
+   kept all round the finger). A real finger's skin, its ridges among pores and noise, repeats little at the working
+   size, so the first cut stays wherever both agree;
 7. back to full size with a smooth edge;
 8. the outline moved onto the photo's edge at full size, to a fraction of a pixel (:func:`_on_the_edge`).
 
